@@ -1,0 +1,242 @@
+"""The Drake scene built from a `Scene`: plant, scene graph, and the RGB-D cameras.
+
+Two modes share one builder:
+- "sim": the cans are free bodies and the gripper fingers slide on their prismatic joints
+  (physics, rendering);
+- "plan": everything but the arm is fixed, so the plant's positions are exactly the 7 arm
+  joints: cans welded where they stand, fingers welded at a given opening, and a held can welded
+  into the gripper. IK, trajectory optimization and Drake's collision checker use this mode.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from pydrake.geometry import (
+    Box as DrakeBox,
+    ClippingRange,
+    CollisionFilterDeclaration,
+    Cylinder,
+    DepthRange,
+    GeometrySet,
+    MakeRenderEngineVtk,
+    RenderCameraCore,
+    RenderEngineVtkParams,
+    ColorRenderCamera,
+    DepthRenderCamera,
+    SceneGraph,
+)
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, CoulombFriction, MultibodyPlant
+from pydrake.multibody.tree import SpatialInertia, UnitInertia
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.sensors import CameraInfo, RgbdSensor
+
+from scenes.robot_model import ALWAYS_TOUCHING, IIWA_URDF, WSG_URDF, load_robot
+from scenes.scene import HeldCan, Scene
+
+RENDERER = "vtk"
+WELDED_GRIPPER_BODIES = ("iiwa_link_7", "body", "left_finger", "right_finger")
+
+
+@dataclasses.dataclass
+class DrakeScene:
+    """Handles to a built diagram. `cameras` maps camera name to its RgbdSensor."""
+
+    diagram: Diagram
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    iiwa: object
+    wsg: object
+    cameras: dict[str, RgbdSensor]
+    X_WCameras: dict[str, RigidTransform]
+    mode: str
+
+
+def look_at(p_m, target_m) -> RigidTransform:
+    """Pose of a camera at p looking at target in Drake's camera convention.
+
+    Drake's camera frame: +z along the optical axis, +x right, +y down in the image. Image "down"
+    is the world's -z projected onto the image plane; for a camera looking straight down (no
+    such projection) image down is world -x, so the robot side of the plate is at the bottom.
+    """
+    p = np.asarray(p_m, float)
+    z = np.asarray(target_m, float) - p
+    z /= np.linalg.norm(z)
+    down = np.array([0.0, 0.0, -1.0])
+    y = down - z * (down @ z)
+    if np.linalg.norm(y) < 1e-6:
+        y = np.array([-1.0, 0.0, 0.0]) - z * (-z[0])
+    y /= np.linalg.norm(y)
+    x = np.cross(y, z)
+    return RigidTransform(RotationMatrix(np.column_stack([x, y, z])), p)
+
+
+def _add_box(plant, name, box, friction):
+    X = RigidTransform(np.asarray(box.center_m))
+    shape = DrakeBox(*box.size_m)
+    plant.RegisterVisualGeometry(plant.world_body(), X, shape, name, np.asarray(box.color_rgba))
+    return plant.RegisterCollisionGeometry(plant.world_body(), X, shape, name, friction)
+
+
+def _can_inertia(spec) -> SpatialInertia:
+    r, h, m = spec.can.radius_m, spec.can.height_m, spec.can.mass_kg
+    return SpatialInertia(m, np.zeros(3), UnitInertia.SolidCylinder(r, h, [0, 0, 1]))
+
+
+def add_scene_to_plant(
+    plant: MultibodyPlant,
+    scene_graph: SceneGraph,
+    scene: Scene,
+    *,
+    mode: str,
+    gripper_opening_m: float | None = None,
+    held: HeldCan | None = None,
+) -> tuple[object, object]:
+    """Add robot, gripper, static world and cans to an unfinalized plant.
+
+    Args:
+        plant: the plant, registered with `scene_graph`.
+        scene_graph: receives the collision filters shared with the python-fcl world.
+        scene: the scene to build.
+        mode: "sim" or "plan" (see the module docstring).
+        gripper_opening_m: in "plan" mode, the finger opening to weld the fingers at.
+        held: in "plan" mode, a can welded into the gripper (it is then not on the plate).
+
+    Returns:
+        The iiwa and WSG model instances.
+    """
+    if mode not in ("sim", "plan"):
+        raise ValueError(f"mode must be 'sim' or 'plan', got {mode!r}")
+    spec = scene.spec
+    robot = load_robot()
+    parser = Parser(plant)
+    (iiwa,) = parser.AddModels(str(IIWA_URDF))
+    (wsg,) = parser.AddModels(str(WSG_URDF))
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("iiwa_link_0", iiwa))
+    plant.WeldFrames(
+        plant.GetFrameByName("iiwa_link_7", iiwa),
+        plant.GetFrameByName("body", wsg),
+        RigidTransform(robot.X_7G),
+    )
+    if mode == "plan":
+        opening = spec.grasp.open_width_m if gripper_opening_m is None else gripper_opening_m
+        body_frame = plant.GetFrameByName("body", wsg)
+        for name, X_GF in robot.finger_offsets(opening).items():
+            plant.RemoveJoint(plant.GetJointByName(f"{name}_sliding_joint", wsg))
+            plant.WeldFrames(body_frame, plant.GetFrameByName(name, wsg), RigidTransform(X_GF))
+
+    friction = CoulombFriction(0.9, 0.8)
+    statics = {name: _add_box(plant, name, box, friction) for name, box in spec.static_boxes().items()}
+
+    can_shape = Cylinder(spec.can.radius_m, spec.can.height_m)
+    color = np.asarray(spec.can.color_rgba)
+    held_id = held.can.id if held is not None else None
+    cans_instance = plant.AddModelInstance("cans")
+    for can in scene.cans:
+        if can.id == held_id:
+            continue
+        body = plant.AddRigidBody(f"can_{can.id}", cans_instance, _can_inertia(spec))
+        plant.RegisterVisualGeometry(body, RigidTransform(), can_shape, f"can_{can.id}", color)
+        plant.RegisterCollisionGeometry(body, RigidTransform(), can_shape, f"can_{can.id}", friction)
+        if mode == "plan":
+            plant.WeldFrames(plant.world_frame(), body.body_frame(), RigidTransform(can.X_WC()))
+        else:
+            plant.SetDefaultFloatingBaseBodyPose(body, RigidTransform(can.X_WC()))
+    held_gid = None
+    if held is not None:
+        if mode != "plan":
+            raise ValueError("a held can is only modelled in 'plan' mode")
+        body = plant.AddRigidBody("held_can", cans_instance, _can_inertia(spec))
+        plant.RegisterVisualGeometry(body, RigidTransform(), can_shape, "held_can", color)
+        held_gid = plant.RegisterCollisionGeometry(body, RigidTransform(), can_shape, "held_can", friction)
+        plant.WeldFrames(plant.GetFrameByName("body", wsg), body.body_frame(), RigidTransform(held.X_GC))
+
+    plant.Finalize()
+    scene_graph.collision_filter_manager().Apply(
+        _filters(plant, iiwa, wsg, statics.get("plate"), held_gid)
+    )
+    return iiwa, wsg
+
+
+def _filters(plant, iiwa, wsg, plate_gid, held_gid) -> CollisionFilterDeclaration:
+    """The filters shared with the python-fcl world (see `scenes.fcl_world`).
+
+    Drake itself already filters bodies joined by a joint and bodies welded into one rigid
+    assembly (link 7, gripper, fingers, held can in "plan" mode).
+    """
+    decl = CollisionFilterDeclaration()
+
+    def body_set(name):
+        instance = iiwa if name.startswith("iiwa_") else wsg
+        return plant.CollectRegisteredGeometries([plant.GetBodyByName(name, instance)])
+
+    for a, b in ALWAYS_TOUCHING:
+        decl.ExcludeBetween(body_set(a), body_set(b))
+    if held_gid is not None and plate_gid is not None:
+        # The held can rests on the plate at the grasp: that contact is allowed (as MoveIt allows
+        # an attached object to touch its support surface).
+        decl.ExcludeBetween(GeometrySet(held_gid), GeometrySet(plate_gid))
+    return decl
+
+
+def _camera_core(spec) -> RenderCameraCore:
+    cam = spec.cameras
+    info = CameraInfo(cam.width_px, cam.height_px, math.radians(cam.fov_y_deg))
+    return RenderCameraCore(RENDERER, info, ClippingRange(*cam.clipping_m), RigidTransform())
+
+
+def build_drake_scene(
+    scene: Scene,
+    *,
+    mode: str = "sim",
+    cameras: bool = True,
+    time_step_s: float = 0.0,
+    gripper_opening_m: float | None = None,
+    held: HeldCan | None = None,
+    builder: DiagramBuilder | None = None,
+    build: bool = True,
+):
+    """Build the scene's diagram.
+
+    Args:
+        scene: what to build.
+        mode: "sim" or "plan".
+        cameras: add the spec's RGB-D cameras (rendered by RenderEngineVtk).
+        time_step_s: the plant's discrete time step (0 for a continuous plant).
+        gripper_opening_m, held: see `add_scene_to_plant` ("plan" mode).
+        builder: an existing builder to add to (then `build=False` leaves it unbuilt).
+        build: build the diagram.
+
+    Returns:
+        A `DrakeScene` (its diagram is None when `build` is False).
+    """
+    builder = builder or DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step_s)
+    iiwa, wsg = add_scene_to_plant(
+        plant, scene_graph, scene, mode=mode, gripper_opening_m=gripper_opening_m, held=held
+    )
+    sensors: dict[str, RgbdSensor] = {}
+    poses: dict[str, RigidTransform] = {}
+    if cameras:
+        scene_graph.AddRenderer(RENDERER, MakeRenderEngineVtk(RenderEngineVtkParams()))
+        core = _camera_core(scene.spec)
+        depth_range = DepthRange(scene.spec.cameras.clipping_m[0] + 1e-3, scene.spec.cameras.clipping_m[1] - 1e-3)
+        for name, pose in scene.spec.cameras.poses.items():
+            X_WB = look_at(pose.p_m, pose.target_m)
+            sensor = builder.AddNamedSystem(
+                f"camera_{name}",
+                RgbdSensor(
+                    scene_graph.world_frame_id(),
+                    X_WB,
+                    ColorRenderCamera(core, False),
+                    DepthRenderCamera(core, depth_range),
+                ),
+            )
+            builder.Connect(scene_graph.get_query_output_port(), sensor.query_object_input_port())
+            sensors[name], poses[name] = sensor, X_WB
+    diagram = builder.Build() if build else None
+    return DrakeScene(diagram, plant, scene_graph, iiwa, wsg, sensors, poses, mode)

@@ -1,0 +1,87 @@
+"""Collision-aware inverse kinematics for one gripper pose, on a "plan"-mode Drake scene.
+
+Used to check that generated cans are graspable and to compute the goal configurations every
+planner shares. Deterministic: the restarts come from a generator seeded by the caller.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.inverse_kinematics import InverseKinematics
+from pydrake.solvers import SnoptSolver, SolverOptions
+
+#: A comfortable arm configuration with the gripper over the table (Drake's examples' "ready").
+Q_READY = np.array([-1.57, 0.1, 0.0, -1.2, 0.0, 1.6, 0.0])
+
+
+@dataclasses.dataclass(frozen=True)
+class IkOptions:
+    """Tolerances of a pose IK (metres, radians) and its restarts."""
+
+    position_tolerance_m: float = 1e-3
+    orientation_tolerance_rad: float = 1e-2
+    min_distance_m: float = 1e-3
+    influence_distance_m: float = 0.05
+    restarts: int = 4
+    major_iterations: int = 150
+
+
+class PoseIk:
+    """Solves gripper-pose IK on one plan-mode `DrakeScene` (built once, solved many times)."""
+
+    def __init__(self, drake_scene) -> None:
+        self.plant = drake_scene.plant
+        self.diagram = drake_scene.diagram
+        self.context = self.diagram.CreateDefaultContext()
+        self.plant_context = self.plant.GetMyMutableContextFromRoot(self.context)
+        self.G = self.plant.GetFrameByName("body", drake_scene.wsg)
+        self.lower = self.plant.GetPositionLowerLimits()
+        self.upper = self.plant.GetPositionUpperLimits()
+        self.solver = SnoptSolver()
+
+    def solve(
+        self,
+        X_WG: np.ndarray,
+        *,
+        q_seed: np.ndarray,
+        rng: np.random.Generator,
+        options: IkOptions = IkOptions(),
+    ) -> np.ndarray | None:
+        """A collision-free configuration reaching X_WG, or None.
+
+        Tries q_seed first, then `options.restarts` random seeds within the joint limits; among
+        the solutions it keeps the one closest to q_seed.
+        """
+        X = RigidTransform(X_WG)
+        solver_options = SolverOptions()
+        # A failing solve otherwise grinds on for a second; real solutions come in far fewer.
+        solver_options.SetOption(SnoptSolver.id(), "Major iterations limit", options.major_iterations)
+        best, best_d = None, np.inf
+        seeds = [np.asarray(q_seed, float)] + [
+            rng.uniform(self.lower, self.upper) for _ in range(options.restarts)
+        ]
+        for i, seed in enumerate(seeds):
+            ik = InverseKinematics(self.plant, self.plant_context)
+            q = ik.q()
+            tol = np.full(3, options.position_tolerance_m)
+            ik.AddPositionConstraint(self.G, np.zeros(3), self.plant.world_frame(),
+                                     X.translation() - tol, X.translation() + tol)
+            ik.AddOrientationConstraint(self.G, RotationMatrix(), self.plant.world_frame(),
+                                        X.rotation(), options.orientation_tolerance_rad)
+            ik.AddMinimumDistanceLowerBoundConstraint(options.min_distance_m,
+                                                      options.influence_distance_m)
+            prog = ik.get_mutable_prog()
+            prog.AddQuadraticErrorCost(np.eye(7), np.asarray(q_seed, float), q)
+            prog.SetInitialGuess(q, seed)
+            result = self.solver.Solve(prog, None, solver_options)
+            if result.is_success():
+                sol = result.GetSolution(q)
+                d = float(np.linalg.norm(sol - q_seed))
+                if d < best_d:
+                    best, best_d = sol, d
+                if i == 0:
+                    break  # the seed itself led to a solution: deterministic and closest
+        return best
