@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import math
 
 import numpy as np
@@ -80,6 +82,11 @@ class Scene:
         ids = set(ids)
         return dataclasses.replace(self, cans=tuple(c for c in self.cans if c.id not in ids))
 
+    def key(self) -> str:
+        """A short content hash of the scene (spec and cans): identifies it across processes."""
+        blob = json.dumps({"spec": self.spec.to_dict(), "truth": self.to_json()}, sort_keys=True, default=list)
+        return hashlib.sha1(blob.encode()).hexdigest()[:16]
+
     def to_json(self) -> dict:
         """The ground truth as printed by `python -m suite scene --json`."""
         plate = self.spec.plate
@@ -92,3 +99,4 @@ class Scene:
             },
             "cans": [c.to_json() for c in self.cans],
         }
+

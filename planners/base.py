@@ -1,0 +1,142 @@
+"""The planner interface: problems in, results out, identical for every planner family."""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+
+from scenes.scene import HeldCan, Scene
+
+
+class PlanStatus(str, enum.Enum):
+    """Outcome of one planning trial. Only SUCCESS carries a path that counts."""
+
+    SUCCESS = "success"
+    NO_SOLUTION = "no_solution"
+    TIMEOUT = "timeout"
+    INVALID_START = "invalid_start"
+    INVALID_GOAL = "invalid_goal"
+    IK_FAILED = "ik_failed"
+    ERROR = "error"
+    # Set by the orchestrator, never by a planner:
+    INVALID_SOLUTION = "invalid_solution"  # the independent validator rejected the path
+    TIMING_FAILED = "timing_failed"  # TOPP-RA could not time the path
+    CRASH = "crash"  # the worker process died
+    KILLED_TIMEOUT = "killed_timeout"  # the worker overran the hard time limit and was killed
+
+
+#: The motions of the paper's pick-and-place cycle, in order.
+PROBLEM_KINDS = ("approach", "descend", "lift", "transit", "return")
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskWaypoint:
+    """A gripper pose of the nominal trajectory at a time of the paper's schedule (time units)."""
+
+    t: float
+    X_WG: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class PlanningProblem:
+    """One motion of the pick-and-place cycle.
+
+    Attributes:
+        kind: one of PROBLEM_KINDS.
+        scene: the scene (ground truth: what the robot really collides with).
+        can_id: the can this cycle picks (ground-truth id).
+        q_start: start configuration (7,) rad.
+        q_goal: goal configuration (7,) rad shared by every planner (collision-aware IK, computed
+            once), or None when no IK solution exists (then `pre_status` is IK_FAILED).
+        X_WG_goal: the goal gripper pose (4, 4).
+        waypoints: the nominal task-space trajectory from the start pose to the goal pose
+            (the nominal-waypoint planner follows it; the others may ignore it).
+        held: the can carried in the gripper, part of the robot for collision, or None.
+        gripper_opening_m: finger opening during the motion.
+        removed_can_ids: cans already recycled (not on the plate any more).
+        time_limit_s: the planner's budget.
+        seed: the trial's seed (derived from the run seed and the trial's identity).
+        pre_status: set when the problem cannot be posed (IK_FAILED); planners are not run.
+    """
+
+    kind: str
+    scene: Scene
+    can_id: int
+    q_start: np.ndarray
+    q_goal: np.ndarray | None
+    X_WG_goal: np.ndarray
+    waypoints: tuple[TaskWaypoint, ...]
+    held: HeldCan | None
+    gripper_opening_m: float
+    removed_can_ids: tuple[int, ...]
+    time_limit_s: float
+    seed: int
+    pre_status: PlanStatus | None = None
+
+    @property
+    def name(self) -> str:
+        return f"can{self.can_id}/{self.kind}"
+
+    def world_key(self) -> tuple:
+        """Identifies the collision world of this problem (for per-process caches)."""
+        return (
+            self.scene.key(),
+            None if self.held is None else (self.held.can.id, self.held.X_GC.round(9).tobytes()),
+            round(self.gripper_opening_m, 9),
+            tuple(sorted(self.removed_can_ids)),
+        )
+
+    def with_(self, **changes) -> "PlanningProblem":
+        return dataclasses.replace(self, **changes)
+
+
+@dataclasses.dataclass(frozen=True)
+class PlanResult:
+    """What a planner returns.
+
+    Attributes:
+        status: the outcome.
+        path: joint waypoints (N, 7) rad from q_start to q_goal, or None.
+        stats: planner statistics (plain JSON values): iterations, collision_checks, solver,
+            solver_status, costs, solve_time_s, simplify_time_s, ...
+    """
+
+    status: PlanStatus
+    path: np.ndarray | None = None
+    stats: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+
+@runtime_checkable
+class Planner(Protocol):
+    """A motion planner. `Config` is a dataclass of its settings; `plan` never raises for a
+    problem it cannot solve: that is a status."""
+
+    name: ClassVar[str]
+    Config: ClassVar[type]
+
+    def __init__(self, config: Any = None) -> None: ...
+
+    def plan(self, problem: PlanningProblem) -> PlanResult: ...
+
+
+def check_endpoints(problem: PlanningProblem, world) -> PlanResult | None:
+    """The shared pre-check: an invalid start or goal is reported at once.
+
+    Returns a PlanResult with INVALID_START / INVALID_GOAL (or the problem's pre_status), or None
+    if both ends are valid.
+    """
+    if problem.pre_status is not None:
+        return PlanResult(problem.pre_status, None, {})
+    if problem.q_goal is None:
+        return PlanResult(PlanStatus.IK_FAILED, None, {})
+    lo, hi = world.robot.lower_rad, world.robot.upper_rad
+    for q, status in ((problem.q_start, PlanStatus.INVALID_START), (problem.q_goal, PlanStatus.INVALID_GOAL)):
+        q = np.asarray(q, float)
+        if q.shape != (7,) or not np.all(np.isfinite(q)) or np.any(q < lo - 1e-9) or np.any(q > hi + 1e-9):
+            return PlanResult(status, None, {"reason": "outside joint limits"})
+        if not world.is_free(q):
+            return PlanResult(status, None, {"reason": "in collision"})
+    return None

@@ -1,0 +1,48 @@
+"""Per-process caches of the collision world and the plan-mode Drake scene of a problem.
+
+Problems cross process boundaries as plain values; each worker builds the heavy objects (Drake
+diagrams, python-fcl objects) once per distinct world and reuses them.
+"""
+
+from __future__ import annotations
+
+from scenes.fcl_world import CollisionWorld
+
+_FCL: dict[tuple, CollisionWorld] = {}
+_DRAKE: dict[tuple, object] = {}
+MAX_CACHED = 64
+
+
+def _remember(cache: dict, key, value):
+    if len(cache) >= MAX_CACHED:
+        cache.pop(next(iter(cache)))
+    cache[key] = value
+    return value
+
+
+def collision_world(problem) -> CollisionWorld:
+    """The python-fcl world of a problem (robot with held can, remaining cans, opening)."""
+    key = problem.world_key()
+    world = _FCL.get(key)
+    if world is None:
+        world = _remember(_FCL, key, CollisionWorld(
+            problem.scene,
+            gripper_opening_m=problem.gripper_opening_m,
+            held=problem.held,
+            removed_can_ids=problem.removed_can_ids,
+        ))
+    return world
+
+
+def drake_plan_scene(problem):
+    """The plan-mode Drake scene of a problem (its plant's positions are the 7 arm joints)."""
+    from scenes.drake_scene import build_drake_scene
+
+    key = problem.world_key()
+    ds = _DRAKE.get(key)
+    if ds is None:
+        scene = problem.scene.without_cans(problem.removed_can_ids)
+        ds = _remember(_DRAKE, key, build_drake_scene(
+            scene, mode="plan", cameras=False, gripper_opening_m=problem.gripper_opening_m, held=problem.held
+        ))
+    return ds
