@@ -1,0 +1,157 @@
+"""Executors: run trial functions in worker processes with a hard time limit per trial.
+
+The local executor keeps J spawned worker processes. The parent hands each a trial, waits for its
+answer up to the trial's hard limit, and kills a worker that overruns (the trial gets a
+`killed_timeout` record) or dies (a `crash` record); a fresh worker takes its place and the run
+goes on. Results come back in completion order; only the parent writes records.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import multiprocessing as mp
+import multiprocessing.connection
+import os
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class Job:
+    """A unit of work: `fn(payload)` must return a JSON-able dict, within `hard_limit_s`."""
+
+    key: str
+    fn: Callable[[Any], dict]
+    payload: Any
+    hard_limit_s: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Outcome:
+    """A job's result, or how it failed ("crash" / "killed_timeout") with a message."""
+
+    job: Job
+    result: dict | None
+    failure: str | None = None
+    message: str = ""
+    wall_time_s: float = 0.0
+
+
+def _worker_main(conn, init: Callable[[], None] | None) -> None:
+    if init is not None:
+        init()
+    while True:
+        try:
+            item = conn.recv()
+        except EOFError:
+            return
+        if item is None:
+            return
+        fn, payload = item
+        conn.send(fn(payload))
+
+
+class _Worker:
+    def __init__(self, ctx, init):
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_worker_main, args=(child, init), daemon=True)
+        self.proc.start()
+        child.close()
+        self.job: Job | None = None
+        self.started = 0.0
+
+    def submit(self, job: Job) -> None:
+        self.job, self.started = job, time.monotonic()
+        self.conn.send((job.fn, job.payload))
+
+    def kill(self) -> None:
+        try:
+            self.proc.kill()
+        except Exception:  # already gone
+            pass
+        self.proc.join(timeout=5)
+        self.conn.close()
+
+    def stop(self) -> None:
+        try:
+            self.conn.send(None)
+        except (BrokenPipeError, OSError):
+            pass
+        self.proc.join(timeout=5)
+        if self.proc.is_alive():
+            self.kill()
+
+
+class LocalExecutor:
+    """A pool of `jobs` spawned worker processes.
+
+    Args:
+        jobs: number of worker processes.
+        init: called once in each worker before its first job (e.g. to quiet logging or seed
+            process-global RNGs).
+    """
+
+    def __init__(self, *, jobs: int, init: Callable[[], None] | None = None) -> None:
+        self.jobs = jobs
+        self.init = init
+        self._ctx = mp.get_context("spawn")
+
+    def run(self, jobs: list[Job]) -> Iterator[Outcome]:
+        """Run the jobs; yield each outcome as it completes."""
+        queue = deque(jobs)
+        workers = [_Worker(self._ctx, self.init) for _ in range(min(self.jobs, len(queue)) or 0)]
+        try:
+            while queue or any(w.job is not None for w in workers):
+                for w in workers:
+                    if w.job is None and queue:
+                        w.submit(queue.popleft())
+                busy = [w for w in workers if w.job is not None]
+                now = time.monotonic()
+                timeout = max(0.0, min(w.started + w.job.hard_limit_s - now for w in busy))
+                ready = mp.connection.wait([w.conn for w in busy] + [w.proc.sentinel for w in busy],
+                                           timeout=min(timeout, 1.0))
+                for i, w in enumerate(workers):
+                    if w.job is None:
+                        continue
+                    job, elapsed = w.job, time.monotonic() - w.started
+                    if w.conn in ready:
+                        try:
+                            result = w.conn.recv()
+                        except (EOFError, OSError):
+                            result = None
+                        if result is not None:
+                            w.job = None
+                            yield Outcome(job, result, None, "", elapsed)
+                            continue
+                    if w.proc.sentinel in ready or not w.proc.is_alive():
+                        code = w.proc.exitcode
+                        w.kill()
+                        workers[i] = _Worker(self._ctx, self.init)
+                        yield Outcome(job, None, "crash", f"worker exited with code {code}", elapsed)
+                    elif elapsed > job.hard_limit_s:
+                        w.kill()
+                        workers[i] = _Worker(self._ctx, self.init)
+                        yield Outcome(job, None, "killed_timeout",
+                                      f"killed after {elapsed:.1f} s (hard limit {job.hard_limit_s:.1f} s)", elapsed)
+        finally:
+            for w in workers:
+                w.stop()
+
+
+def cpu_description() -> dict[str, Any]:
+    """CPU model and core count of this machine (for manifests)."""
+    model = ""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    model = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return {"cpu": model or os.uname().machine, "cores": os.cpu_count()}
