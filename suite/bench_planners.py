@@ -1,0 +1,40 @@
+"""`python -m suite bench planners`: the planners' figures and the timing+metrics cost."""
+
+from __future__ import annotations
+
+import argparse
+
+from suite.args import positive_int
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenes", type=positive_int, default=20, help="scenes per variant (default 20)")
+    p.add_argument("--only", default="rrt,optim,metrics",
+                   help="comma-separated parts: rrt (OMPL family), optim (ik, trajopt), metrics (default all)")
+    p.add_argument("--repeats", type=positive_int, default=50, help="repeats of the metrics benchmark (default 50)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from suite.errors import SuiteError
+
+    parts = [s.strip() for s in args.only.split(",") if s.strip()]
+    unknown = set(parts) - {"rrt", "optim", "metrics"}
+    if unknown:
+        raise SuiteError(f"--only: unknown part {sorted(unknown)[0]!r}; allowed: rrt, optim, metrics")
+    from suite.runner import worker_init
+
+    worker_init()
+    if "rrt" in parts:
+        from suite.bench_ompl import run_bench as ompl_bench
+
+        ompl_bench(scenes=args.scenes, variant="wall")
+    if "optim" in parts:
+        from suite.bench_optim import run_bench as optim_bench
+
+        for variant in ("open", "wall"):
+            optim_bench(scenes=args.scenes, variant=variant)
+    if "metrics" in parts:
+        from suite.bench_metrics import run_bench as metrics_bench
+
+        metrics_bench(repeats=args.repeats)
+    return 0
