@@ -1,0 +1,239 @@
+"""From one top-camera frame to can detections and grasps (the paper's Algorithm 2).
+
+Per separated mask: back-project its (eroded) pixels, estimate normals, keep those that are
+nearly vertical and well above the plate. For an upright can they cover its top disc, for a
+lying can they form a strip along its highest line. The strip's (or disc's) mean xy is the can's
+xy; the height of its top tells lying from upright (known can size); for a lying can, a
+total-least-squares line through the strip's xy points (PCA, not a y-on-x regression, which fails
+for an axis parallel to y) gives the axis. The grasp itself comes from the shared rule in
+`scenes.grasp_rule`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+
+import numpy as np
+
+from perception.crop import crop_rgb, roi_mask, work_volume_corners_W
+from perception.geometry import back_project_camera, camera_to_world, project
+from perception.normals import estimate_normals
+from perception.segment import Components, can_mask, separate
+from scenes.grasp_rule import Grasp, make_grasp
+from scenes.render import CameraImage
+from scenes.spec import SceneSpec
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class PerceptionParams:
+    """Settings of the pipeline, all relative to the known geometry where possible.
+
+    Attributes:
+        erode_px: erosion radius of each mask, pixels (drops silhouette pixels, paper's Fig. 9).
+        normal_window_px: side of the plane-fit neighbourhood, pixels (odd).
+        min_neighbour_fraction: a normal needs this fraction of its window to be valid points.
+        vertical_tilt_deg: a normal within this angle of world +z counts as vertical.
+        min_area_fraction: a component smaller than this fraction of the smallest silhouette a
+            can may have in the image is a speck, not a can.
+        min_vertical_points: fewer vertical normals than this and the component is not a can.
+        top_percentile: the can's top height is this percentile of the vertical points' z (the
+            paper takes the max; a high percentile is the max without the noise's outliers).
+    """
+
+    erode_px: int = 3
+    normal_window_px: int = 9
+    min_neighbour_fraction: float = 0.5
+    vertical_tilt_deg: float = 20.0
+    min_area_fraction: float = 0.25
+    min_vertical_points: int = 30
+    top_percentile: float = 90.0
+
+
+@dataclasses.dataclass(frozen=True)
+class CanDetection:
+    """One perceived can.
+
+    Attributes:
+        id: index of the detection in its frame.
+        p_WC_m: estimated centre of the can (middle of its axis) in the world, metres.
+        lying: True if the can is judged to lie on its side.
+        axis_yaw_rad: direction of a lying can's axis from world +x, in [-pi/2, pi/2) (an axis has
+            no sign); 0 for an upright can.
+        top_z_m: measured height of the can's highest point, metres.
+        grasp: the grasp and pre-grasp the shared rule gives for this estimate.
+        n_points: how many vertical-normal points the estimate rests on.
+        area_px: the component's area in the image, pixels.
+    """
+
+    id: int
+    p_WC_m: tuple[float, float, float]
+    lying: bool
+    axis_yaw_rad: float
+    top_z_m: float
+    grasp: Grasp
+    n_points: int
+    area_px: int
+
+    def to_json(self) -> dict:
+        return {
+            "p_WC_m": [round(float(v), 6) for v in self.p_WC_m],
+            "lying": self.lying,
+            "axis_yaw_rad": round(float(self.axis_yaw_rad), 6),
+            **self.grasp.to_json(),
+        }
+
+
+@dataclasses.dataclass(frozen=True)
+class FrameAnalysis:
+    """What one frame went through (kept for the debug images).
+
+    Attributes:
+        image: the frame.
+        roi: (H, W) bool, the work volume's image (calibration crop).
+        rgb_cropped: the colour image with everything outside `roi` set to empty space.
+        mask: (H, W) bool, can-coloured pixels inside `roi`.
+        components: the separated, eroded masks.
+        p_W: (N, 3) world points of the pixels that got normals; `labels` (N,) their component.
+        n_W: (N, 3) their world-frame normals (facing the camera).
+        vertical: (N,) bool, the points Algorithm 2 keeps.
+    """
+
+    image: CameraImage
+    roi: np.ndarray
+    rgb_cropped: np.ndarray
+    mask: np.ndarray
+    components: Components
+    p_W: np.ndarray
+    n_W: np.ndarray
+    labels: np.ndarray
+    vertical: np.ndarray
+
+
+def min_area_px(spec: SceneSpec, image: CameraImage, fraction: float) -> int:
+    """`fraction` of the smallest silhouette a can may have in this image (its end disc seen
+    from the farthest corner of the work volume), pixels."""
+    _, z = project(work_volume_corners_W(spec), K=image.K, X_WC=image.X_WC)
+    f = min(image.K[0, 0], image.K[1, 1])
+    r_px = f * spec.can.radius_m / float(z.max())
+    return max(1, int(fraction * math.pi * r_px * r_px))
+
+
+def segment_frame(image: CameraImage, spec: SceneSpec, params: PerceptionParams) -> tuple:
+    """Crop, colour mask and separate one frame. Returns (roi, rgb_cropped, mask, components)."""
+    roi = roi_mask(spec, K=image.K, X_WC=image.X_WC, shape=image.depth_m.shape)
+    rgb = crop_rgb(image.rgb, roi)
+    mask = can_mask(rgb, roi)
+    comps = separate(mask, min_area_px=min_area_px(spec, image, params.min_area_fraction), erode_px=params.erode_px)
+    return roi, rgb, mask, comps
+
+
+def axis_yaw_tls(xy: np.ndarray) -> float:
+    """Direction of the total-least-squares line through points (N, 2), from +x, in [-pi/2, pi/2).
+
+    The principal axis of the points' covariance: it treats x and y alike, so a line parallel to y
+    is as well found as one parallel to x.
+    """
+    d = xy - xy.mean(axis=0)
+    _, vecs = np.linalg.eigh(d.T @ d)
+    a = vecs[:, -1]
+    yaw = math.atan2(a[1], a[0])
+    return (yaw + math.pi / 2) % math.pi - math.pi / 2
+
+
+def _bbox(mask: np.ndarray, *, pad: int) -> tuple[int, int, int, int]:
+    """Rows [r0, r1) and columns [c0, c1) holding all True pixels of `mask`, padded."""
+    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+    if rows.size == 0:
+        return 0, 0, 0, 0
+    h, w = mask.shape
+    return max(rows[0] - pad, 0), min(rows[-1] + 1 + pad, h), max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, w)
+
+
+def analyse_frame(image: CameraImage, spec: SceneSpec, params: PerceptionParams = PerceptionParams()) -> FrameAnalysis:
+    """Segment a frame and estimate normals on its cans' pixels."""
+    roi, rgb, mask, comps = segment_frame(image, spec, params)
+    w = params.normal_window_px
+    # Work on the bounding box of the cans' pixels (plus the window) only: it saves most of the time.
+    r0, r1, c0, c1 = _bbox(comps.eroded > 0, pad=w // 2 + 1)
+    depth = image.depth_m[r0:r1, c0:c1]
+    valid = (comps.eroded[r0:r1, c0:c1] > 0) & np.isfinite(depth)
+    p_C = back_project_camera(depth, K=image.K, origin_px=(r0, c0))
+    (rows, cols), n_C = estimate_normals(
+        p_C, valid, window_px=w, min_neighbours=max(3, int(params.min_neighbour_fraction * w * w))
+    )
+    p_W = camera_to_world(p_C[rows, cols], image.X_WC)
+    rows, cols = rows + r0, cols + c0
+    n_W = n_C @ image.X_WC[:3, :3].T
+    # Algorithm 2's filter: nearly vertical, well above the plate (half the lowest can top), and
+    # above the plate's footprint (points off the plate are not on the plate's cans).
+    plate = spec.plate
+    cx, cy, _ = plate.center_m
+    sx, sy = plate.size_m[:2]
+    z_min = spec.plate_top_z_m + 0.5 * min(2 * spec.can.radius_m, spec.can.height_m)
+    vertical = (
+        (n_W[:, 2] >= math.cos(math.radians(params.vertical_tilt_deg)))
+        & (p_W[:, 2] >= z_min)
+        & (np.abs(p_W[:, 0] - cx) <= sx / 2)
+        & (np.abs(p_W[:, 1] - cy) <= sy / 2)
+    )
+    return FrameAnalysis(image, roi, rgb, mask, comps, p_W, n_W, comps.eroded[rows, cols], vertical)
+
+
+def detect_cans(
+    image: CameraImage, spec: SceneSpec, params: PerceptionParams = PerceptionParams()
+) -> tuple[list[CanDetection], FrameAnalysis]:
+    """Detect the cans in a top-camera frame and compute their grasps (Algorithm 2).
+
+    Args:
+        image: an RGB-D frame looking down on the plate.
+        spec: the scene spec (plate, can size, grasp offsets).
+        params: pipeline settings.
+
+    Returns:
+        The detections (in component order) and the frame's intermediate results.
+    """
+    fa = analyse_frame(image, spec, params)
+    r, h = spec.can.radius_m, spec.can.height_m
+    top_plate = spec.plate_top_z_m
+    # The top of a lying can is 2r above the plate, of an upright can h: split halfway.
+    lying_split_m = (2 * r + h) / 2
+    out: list[CanDetection] = []
+    for k in range(1, fa.components.count + 1):
+        sel = fa.vertical & (fa.labels == k)
+        n = int(sel.sum())
+        if n < params.min_vertical_points:
+            log.debug("component %d: %d vertical points, not a can", k, n)
+            continue
+        pts = fa.p_W[sel]
+        xy = pts[:, :2].mean(axis=0)
+        top_z = float(np.percentile(pts[:, 2], params.top_percentile))
+        lying = bool(top_z - top_plate < lying_split_m)
+        yaw = axis_yaw_tls(pts[:, :2]) if lying else 0.0
+        z = top_plate + (r if lying else h / 2)
+        det_id = len(out)
+        grasp = make_grasp(
+            can_id=det_id,
+            p_xy_m=xy,
+            top_z_m=top_z,
+            lying=lying,
+            axis_yaw_rad=yaw,
+            top_offset_m=spec.grasp.top_offset_m,
+            pregrasp_height_m=spec.grasp.pregrasp_height_m,
+        )
+        out.append(
+            CanDetection(
+                id=det_id,
+                p_WC_m=(float(xy[0]), float(xy[1]), float(z)),
+                lying=lying,
+                axis_yaw_rad=float(yaw),
+                top_z_m=top_z,
+                grasp=grasp,
+                n_points=n,
+                area_px=fa.components.areas_px[k - 1],
+            )
+        )
+    return out, fa

@@ -1,0 +1,63 @@
+"""The whole perception pass on a scene: observe, then detect the cans in the top camera."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from perception.grasps import CanDetection, FrameAnalysis, PerceptionParams, analyse_frame, detect_cans
+from perception.observe import observe
+from scenes.scene import Scene
+
+#: the camera whose frame gives the grasps (the paper's: one camera above the plate)
+GRASP_CAMERA = "top"
+
+
+@dataclasses.dataclass(frozen=True)
+class PerceptionResult:
+    """Detections of one scene, how long it took, and the frames' intermediate results.
+
+    Attributes:
+        detections: the cans found in the top camera's frame.
+        render_time_s: rendering (scene build included), seconds.
+        process_time_s: everything after rendering for the grasp camera, seconds.
+        frames: camera name -> its analysis (the grasp camera always; the others when asked).
+    """
+
+    detections: tuple[CanDetection, ...]
+    render_time_s: float
+    process_time_s: float
+    frames: dict[str, FrameAnalysis]
+
+
+def perceive(
+    scene: Scene,
+    *,
+    depth_noise_m: float = 0.0,
+    rng: np.random.Generator | None = None,
+    all_cameras: bool = False,
+    params: PerceptionParams = PerceptionParams(),
+) -> PerceptionResult:
+    """Render the scene and detect its cans.
+
+    Args:
+        scene: the scene.
+        depth_noise_m: Gaussian depth noise sigma (metres), with 1% of the pixels dropped; 0 for
+            a perfect sensor.
+        rng: the noise's generator (required when `depth_noise_m` > 0).
+        all_cameras: also crop, segment and analyse the other cameras (for the debug images).
+        params: pipeline settings.
+    """
+    cams = None if all_cameras else [GRASP_CAMERA]
+    t0 = time.perf_counter()
+    images = observe(scene, cameras=cams, depth_noise_m=depth_noise_m, rng=rng)
+    t1 = time.perf_counter()
+    detections, fa = detect_cans(images[GRASP_CAMERA], scene.spec, params)
+    t2 = time.perf_counter()
+    frames = {GRASP_CAMERA: fa}
+    for name, image in images.items():
+        if name != GRASP_CAMERA:
+            frames[name] = analyse_frame(image, scene.spec, params)
+    return PerceptionResult(tuple(detections), t1 - t0, t2 - t1, frames)
