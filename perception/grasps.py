@@ -42,6 +42,8 @@ class PerceptionParams:
         min_vertical_points: fewer vertical normals than this and the component is not a can.
         top_percentile: the can's top height is this percentile of the vertical points' z (the
             paper takes the max; a high percentile is the max without the noise's outliers).
+        max_overhang_m: a can whose estimated footprint reaches further than this beyond the
+            plate's edge is not on the plate (the generator keeps cans 10 mm inside the edge).
     """
 
     erode_px: int = 3
@@ -51,6 +53,7 @@ class PerceptionParams:
     min_area_fraction: float = 0.25
     min_vertical_points: int = 30
     top_percentile: float = 90.0
+    max_overhang_m: float = 0.005
 
 
 @dataclasses.dataclass(frozen=True)
@@ -129,6 +132,20 @@ def segment_frame(image: CameraImage, spec: SceneSpec, params: PerceptionParams)
     mask = can_mask(rgb, roi)
     comps = separate(mask, min_area_px=min_area_px(spec, image, params.min_area_fraction), erode_px=params.erode_px)
     return roi, rgb, mask, comps
+
+
+def footprint_overhang_m(spec: SceneSpec, *, xy, lying: bool, axis_yaw_rad: float) -> float:
+    """How far (metres) an estimated can's footprint reaches beyond the plate's edge (<= 0: inside)."""
+    r, h = spec.can.radius_m, spec.can.height_m
+    if lying:
+        a = np.array([math.cos(axis_yaw_rad), math.sin(axis_yaw_rad)])
+        n = np.array([-a[1], a[0]])
+        half = np.abs(a) * h / 2 + np.abs(n) * r  # half extents of the rectangle along x and y
+    else:
+        half = np.array([r, r])
+    cx, cy, _ = spec.plate.center_m
+    sx, sy = spec.plate.size_m[:2]
+    return float(max(abs(xy[0] - cx) + half[0] - sx / 2, abs(xy[1] - cy) + half[1] - sy / 2))
 
 
 def axis_yaw_tls(xy: np.ndarray) -> float:
@@ -214,6 +231,12 @@ def detect_cans(
         lying = bool(top_z - top_plate < lying_split_m)
         yaw = axis_yaw_tls(pts[:, :2]) if lying else 0.0
         z = top_plate + (r if lying else h / 2)
+        overhang = footprint_overhang_m(spec, xy=xy, lying=lying, axis_yaw_rad=yaw)
+        if overhang > params.max_overhang_m:
+            # Cans stand wholly on the plate; a footprint beyond its edge is a can partly off the
+            # plate (its points beyond the edge were dropped, so its estimate would be biased).
+            log.info("component %d: footprint %.1f mm beyond the plate edge, not a can on the plate", k, overhang * 1e3)
+            continue
         det_id = len(out)
         grasp = make_grasp(
             can_id=det_id,

@@ -67,9 +67,12 @@ def estimate_normals(
         (N, 3) in the camera frame, each facing the camera (n . p < 0).
     """
     where = valid if where is None else where
+    if not valid.any():
+        empty = np.zeros(0, np.intp)
+        return (empty, empty.copy()), np.zeros((0, 3))
     w = valid.astype(np.float64)
     # Centre the coordinates before forming products, to keep the covariance well conditioned.
-    origin = p_C[valid].mean(axis=0) if valid.any() else np.zeros(3)
+    origin = p_C[valid].mean(axis=0)
     p = np.where(valid[..., None], p_C - origin, 0.0)
     k = (window_px, window_px)
 

@@ -12,7 +12,6 @@ from suite.args import add_scene_arguments, nonneg_float, positive_int, scene_fr
 
 log = logging.getLogger(__name__)
 
-#: a detection matches a can when their centres are closer than this in xy (the can radius)
 NOISE_STREAM = 7919  # the depth noise's generator is seeded with (scene seed, this)
 
 
@@ -22,7 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--images", metavar="DIR", help="write debug images (crops, masks, components, normals, grasps) to DIR")
     p.add_argument("--evaluate", action="store_true", help="match detections to the ground truth and print accuracy")
     p.add_argument("--scenes", type=positive_int, default=1,
-                   help="with --evaluate: evaluate seeds seed .. seed+N-1 and print the aggregate (default 1)")
+                   help="with --evaluate: evaluate N scenes from seed on (seeds the generator cannot draw are "
+                        "skipped and named) and print the aggregate (default 1)")
     p.add_argument("--depth-noise-m", type=nonneg_float, default=0.0,
                    help="Gaussian depth noise sigma in metres, with 1%% of depth pixels dropped (default 0)")
 
@@ -79,15 +79,29 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_many(args: argparse.Namespace) -> int:
-    """Evaluate seeds seed .. seed+scenes-1 and print the aggregate figures."""
+    """Evaluate `--scenes` scenes from `--seed` on and print the aggregate figures.
+
+    A detection matches a can when their centres are within the can radius in xy.
+    """
     from perception.evaluate import aggregate, match
     from perception.pipeline import perceive
     from scenes.generate import generate_scene
+    from suite.errors import SuiteError
 
     spec = spec_from_args(args)
-    matches, proc_s, render_s = [], [], []
-    for seed in range(args.seed, args.seed + args.scenes):
-        scene = generate_scene(spec, seed=seed)
+    matches, proc_s, render_s, skipped = [], [], [], []
+    seed = args.seed - 1
+    while len(matches) < args.scenes:
+        seed += 1
+        if len(skipped) > args.scenes:
+            raise SuiteError(f"the generator could not draw {len(skipped)} of the scenes from seed {args.seed}; "
+                             "try fewer cans or a smaller --min-gap-m")
+        try:
+            scene = generate_scene(spec, seed=seed)
+        except SuiteError as exc:  # the generator cannot draw this seed's scene: not perception's failure
+            log.warning("seed %d skipped: %s", seed, exc)
+            skipped.append(seed)
+            continue
         res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(seed))
         m = match(res.detections, scene.cans, gate_m=spec.can.radius_m, radius_m=spec.can.radius_m, height_m=spec.can.height_m)
         matches.append(m)
@@ -101,11 +115,11 @@ def _run_many(args: argparse.Namespace) -> int:
     acc = aggregate(matches)
     timing = {"render_median": round(float(np.median(render_s)), 4), "process_median": round(float(np.median(proc_s)), 4)}
     if args.json:
-        print(json.dumps({"variant": spec.variant, "seeds": [args.seed, args.seed + args.scenes - 1],
-                          "depth_noise_m": args.depth_noise_m, "evaluation": acc.to_json(), "timing_s": timing}))
+        print(json.dumps({"variant": spec.variant, "seeds": [args.seed, seed],
+                          "depth_noise_m": args.depth_noise_m, "skipped_seeds": skipped, "evaluation": acc.to_json(), "timing_s": timing}))
         return 0
-    print(f"variant {spec.variant}, seeds {args.seed}..{args.seed + args.scenes - 1}, "
-          f"depth noise {args.depth_noise_m} m")
+    print(f"variant {spec.variant}, seeds {args.seed}..{seed}, "
+          f"depth noise {args.depth_noise_m} m" + (f", skipped seeds (no scene) {skipped}" if skipped else ""))
     for line in acc.lines():
         print("  " + line)
     print(f"  median time per scene: render {1e3 * timing['render_median']:.0f} ms, "
