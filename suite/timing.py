@@ -78,8 +78,8 @@ class TimedTrajectory:
         dt_s: the sample time step.
         velocity_ratio: max over the dense check of |qd_i| / limit_i (1.0 = at the limit).
         acceleration_ratio: max over the dense check of |qdd_i| / limit_i.
-        path_deviation_rad: an upper bound on the largest L2 distance (rad) from the timed
-            trajectory to the validated piecewise-linear path.
+        path_deviation_rad: the largest L2 distance (rad) from the timed trajectory to the
+            validated piecewise-linear path, measured at the dense check points.
         timing_time_s: wall time spent timing and checking.
         n_gridpoints: TOPP-RA gridpoints of the final solve.
     """
@@ -194,8 +194,9 @@ def _check_intervals(spline, s_grid, sd_grid, v_lim, a_lim, substeps):
 
 
 def _deviation(spline, s_checked, s_knots, seg_of_piece, polyline) -> float:
-    """Upper bound on the distance (L2, rad) of the spline from the polyline: for each checked s,
-    the distance to the closest of the original segment it lies on and its two neighbours."""
+    """Largest distance (L2, rad) of the spline from the polyline over the checked s values; each is
+    measured to the original segment it lies on and its two neighbours (an upper bound on the
+    distance to the whole polyline at that point)."""
     s = s_checked.ravel()
     q = spline(s)
     piece = np.clip(np.searchsorted(s_knots, s, side="right") - 1, 0, len(seg_of_piece) - 1)
@@ -329,6 +330,9 @@ def time_parameterize(
 
     t_grid = _grid_times(grid, sd)
     duration = float(t_grid[-1])
+    if not math.isfinite(duration) or np.any(sd[:-1] + sd[1:] <= 0.0):
+        return _failed("TOPP-RA returned a parameterization that stops on the path", start,
+                       options.sample_dt_s, n_gridpoints=len(grid))
     dt = options.sample_dt_s
     t = np.arange(0.0, duration, dt)
     t = np.append(t[t < duration - 1e-9], duration)
