@@ -122,8 +122,6 @@ def run(args: argparse.Namespace) -> int:
     from suite.runner import prepare_trials, run_trials, write_manifest
 
     config = resolve_config(args)
-    if config.executor == "dask":
-        raise SuiteError("--executor dask is not available yet; use --executor local")
     out = prepare_out(args)
     t0 = time.perf_counter()
     print(f"run directory: {out}", file=sys.stderr)

@@ -191,8 +191,12 @@ def run_trials(trials: list[TrialSpec], *, out: Path, jobs: int, executor: str =
     by_key = {t.trial_id: t for t in todo}
     if executor == "local":
         ex = LocalExecutor(jobs=jobs, init=worker_init)
+    elif executor == "dask":
+        from suite.dask_executor import DaskExecutor
+
+        ex = DaskExecutor(scheduler=scheduler, n_workers=jobs, init=worker_init)
     else:
-        raise SuiteError(f"unknown executor {executor!r}; allowed: local")
+        raise SuiteError(f"unknown executor {executor!r}; allowed: local, dask")
     jobs_ = [Job(t.trial_id, run_trial, t, t.problem.time_limit_s * HARD_LIMIT_FACTOR + HARD_LIMIT_GRACE_S)
              for t in todo]
     bar = tqdm(total=len(trials), initial=len(trials) - len(todo), desc="trials", unit="trial",
