@@ -82,7 +82,8 @@ def run_in_sandbox(fn: Callable[[Any], dict], payload: Any, hard_limit_s: float,
             if result is not None:
                 w.job = None
                 return None, result, elapsed
-        if w.proc.sentinel in ready or not w.proc.is_alive():
+        if w.proc.sentinel in ready or not w.proc.is_alive() or w.conn in ready:
+            w.proc.join(timeout=2.0)  # the pipe's EOF can arrive before the exit code
             code = w.proc.exitcode
             w.kill()
             _SANDBOXES.pop(slot, None)
