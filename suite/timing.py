@@ -43,6 +43,7 @@ log = logging.getLogger(__name__)
 OK = "ok"
 TIMING_FAILED = "timing_failed"
 SPLIT = 4  # a grid interval over the limits is split into this many
+MIN_GRID_INTERVALS = 32
 
 
 @dataclasses.dataclass(frozen=True)
@@ -220,12 +221,15 @@ def _initial_grid(spline, knots_s: np.ndarray, gain: float) -> np.ndarray:
 
     Between gridpoints the limits are only met approximately, and the excess grows with how much
     the path's curvature changes over an interval: a piece of length ds whose second derivative
-    reaches |q''| (rad/rad^2) is cut into 1 + gain * ds * |q''| intervals (at most 16).
+    reaches |q''| (rad/rad^2) is cut into 1 + gain * ds * |q''| intervals (at most 16), and the
+    whole path has at least MIN_GRID_INTERVALS intervals.
     """
     ds = np.diff(knots_s)
     qss = np.abs(spline(knots_s, 2)).max(axis=1)
     bend = np.maximum(qss[:-1], qss[1:]) * ds
     n = np.clip(1 + np.floor(gain * bend).astype(int), 1, 16)
+    # A short path has few knots; TOPP-RA needs interior gridpoints to speed up at all.
+    n = np.maximum(n, math.ceil(MIN_GRID_INTERVALS / len(ds)))
     frac = np.concatenate([np.arange(k) / k for k in n])
     start = np.repeat(knots_s[:-1], n)
     return np.append(start + frac * np.repeat(ds, n), knots_s[-1])

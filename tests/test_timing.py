@@ -4,6 +4,7 @@ and the duration against Drake's own TOPP-RA."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -144,3 +145,14 @@ def test_duration_matches_drake_toppra(path, plan_plant):
     assert tr.ok, tr.reason
     drake_s = drake_toppra_duration(tr, plant=plan_plant)
     assert tr.duration_s == pytest.approx(drake_s, rel=0.02)
+
+
+@pytest.mark.parametrize("distance_rad", [1e-6, 1e-3, 0.04, 0.2, 1.5])
+def test_single_joint_move_takes_the_closed_form_time(distance_rad):
+    """Rest to rest along one joint: a triangle (acceleration-limited) or trapezoid profile."""
+    j = 3
+    v, a = V_LIM[j], A_LIM[j]
+    expected = 2 * math.sqrt(distance_rad / a) if distance_rad <= v * v / a else distance_rad / v + v / a
+    tr = time_parameterize(np.array([Q_READY, Q_READY + distance_rad * np.eye(7)[j]]))
+    assert tr.ok, tr.reason
+    assert tr.duration_s == pytest.approx(expected, rel=0.01)
