@@ -141,7 +141,7 @@ def plot_outcomes(records: Sequence[dict], *, planners: Sequence[str], path: Pat
     statuses = statuses_in(records)
     kinds = problem_kinds_in(records)
     groups = [("all motions", list(records))] + [(k, [r for r in records if r["problem"] == k]) for k in kinds]
-    fig, axes = plt.subplots(1, len(groups), figsize=(2.2 + 1.1 * len(planners) * len(groups), 4.4),
+    fig, axes = plt.subplots(1, len(groups), figsize=(2.0 + 0.8 * len(planners) * len(groups), 4.4),
                              squeeze=False, gridspec_kw={"width_ratios": [1.4] + [1] * (len(groups) - 1)})
     x = np.arange(len(planners))
     for ax, (label, recs) in zip(axes[0], groups):
