@@ -215,14 +215,15 @@ def densify_joint_path(path: np.ndarray, *, step_rad: float = 0.01) -> np.ndarra
     return np.vstack(pieces)
 
 
-def _scene_spec(manifest: dict[str, Any], variant: str):
+def _scene_spec(manifest: dict[str, Any], variant: str, *, cans_seen: int):
+    """The run's scene spec (the manifest's spec file and can count; else the default spec with
+    as many cans as the records name)."""
     from scenes.spec import load_spec
 
     config = manifest.get("config") or {}
     spec = load_spec(config.get("spec"), variant=variant)
-    if isinstance(config.get("cans"), int):
-        spec = spec.with_can_count(config["cans"])
-    return spec
+    count = config.get("cans") if isinstance(config.get("cans"), int) else cans_seen
+    return spec.with_can_count(count) if count else spec
 
 
 def _scene_cans(spec, scene_seed: int, scene_key: str | None):
@@ -282,7 +283,7 @@ def plot_gripper_paths(
     robot = load_robot()
     colors = planner_colors(planners)
     scene_recs = [r for r in records if int(r["scene_seed"]) == scene_seed and r["variant"] == variant]
-    spec = _scene_spec(manifest, variant)
+    spec = _scene_spec(manifest, variant, cans_seen=1 + max((int(r["can_id"]) for r in scene_recs), default=-1))
     key = next((r.get("scene_key") for r in scene_recs if r.get("scene_key")), None)
     cans = _scene_cans(spec, scene_seed, key)
     fig, (ax_top, ax_side) = plt.subplots(1, 2, figsize=(13, 6.2), gridspec_kw={"width_ratios": [1, 1.15]})

@@ -62,3 +62,26 @@ def test_densify_joint_path_keeps_the_polyline():
     assert np.max(np.abs(np.diff(dense, axis=0))) <= 0.01 + 1e-12
     assert len(dense) == 1 + 10 + 40
     assert any(np.allclose(d, path[1]) for d in dense)  # the corner is kept
+
+
+def test_plot_command_redraws_from_trials_alone(run_dir, tmp_path, capsys):
+    from suite.cli import main
+
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    (copy / "trials.jsonl").write_bytes((run_dir / "trials.jsonl").read_bytes())  # no manifest
+    assert main(["plot", str(copy), "--no-plots"]) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[0].split()[:2] == ["planner", "success"]
+    assert {"summary.md", "summary.csv", "paired.csv", "arena"} <= {p.name for p in copy.iterdir()}
+    assert not (copy / "plots").exists()
+
+
+def test_plot_command_errors_name_the_directory(tmp_path, capsys):
+    from suite.cli import main
+
+    assert main(["plot", str(tmp_path / "missing")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"error: run directory {str(tmp_path / 'missing')!r} does not exist"
+    assert main(["plot", str(tmp_path)]) == 2
+    assert "holds no trials.jsonl" in capsys.readouterr().err
