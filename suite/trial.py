@@ -147,15 +147,21 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
             stats["invalid_reason"] = reason
         else:
             from suite.metrics import score
+            from suite.timing import time_parameterize
 
-            scored = score(path=path, world=world, X_WG_goal=problem.X_WG_goal)
-            if scored.get("timing_status", "ok") != "ok":
+            timed = time_parameterize(path, robot=world.robot)
+            if timed.status != "ok":
                 status = PlanStatus.TIMING_FAILED
-            metrics = {k: v for k, v in scored.items() if isinstance(v, (int, float))}
+                stats["timing_reason"] = timed.reason
+            scored = score(path=path, world=world, X_WG_goal=problem.X_WG_goal, timed=timed)
+            # NaN (the timing metrics of an untimed path) is stored as null: JSON has no NaN.
+            metrics = {k: (float(v) if np.isfinite(v) else None) for k, v in scored.items()
+                       if isinstance(v, (int, float)) and not isinstance(v, bool)}
     record.update(
         status=status.value,
         planning_time_s=planning_time_s,
-        path=None if path is None or status != PlanStatus.SUCCESS else path.round(10).tolist(),
+        path=None if path is None or status not in (PlanStatus.SUCCESS, PlanStatus.TIMING_FAILED)
+        else path.round(10).tolist(),
         metrics=metrics,
         stats=_jsonable(stats),
     )
