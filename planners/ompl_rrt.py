@@ -1,0 +1,493 @@
+"""OMPL sampling-based planners in joint space: `rrt` (RRT-Connect), `rrtstar`, `bitstar`, `aorrtc`, `prm`.
+
+The state space is the arm's 7 joints (RealVectorStateSpace with the joint limits). States and
+motions are checked by the problem's python-fcl world (`suite.worlds.collision_world`): a state by
+`is_free`, a straight motion by one batched `first_collision` query over samples at most
+`resolution_rad` apart in every joint, the end state and coarse samples first so that a blocked
+motion is rejected after few exact checks. The solution is shortened by OMPL's PathSimplifier
+under a time budget and, unless disabled, re-checked at the validator's resolution (0.01 rad).
+
+Randomness: OMPL draws every RNG's seed from one process-global seed generator. A trial restarts
+that generator at a seed derived from `problem.seed` and the problem's identity before it creates
+any OMPL object, so all of the trial's OMPL randomness (RRT-Connect's StateSampler, the
+simplifier's shortcuts, the nearest-neighbour structures) depends on that seed alone, not on the
+trials the process ran before. (A custom sampler cannot do this for RRT-Connect: it draws from
+`StateSpace::allocStateSampler`, whose allocator the Python bindings do not expose, and the
+simplifier has its own RNG.) Only `rrt` stops at its first solution, so only its path is
+reproducible; the optimizing planners run until their time budget and their result depends on
+how far they get.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import logging
+import math
+import time
+from typing import Any, ClassVar
+
+import numpy as np
+from ompl import base as ob
+from ompl import geometric as og
+from ompl import util as ou
+
+from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from suite.errors import SuiteError
+from suite.worlds import collision_world
+
+log = logging.getLogger(__name__)
+
+DOF = 7
+#: How many samples of a motion (end state and coarsest first) go into the first batched query.
+COARSE_BATCH = 8
+SIMPLIFIERS = ("rope", "full", "rope+full")
+
+
+# --- configuration ---------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class OmplConfig:
+    """Settings shared by the OMPL planners.
+
+    Attributes:
+        range_rad: the planner's extension step (joint-space L2 norm, rad); None for OMPL's
+            default (0.2 x the space's maximum extent, about 2.8 rad here).
+        resolution_rad: the largest joint step between checked samples of a motion while
+            planning and simplifying (rad).
+        simplifier: how OMPL's PathSimplifier shortens the path: "rope" (`ropeShortcutPath`:
+            deterministic, pulls the path tight from the start), "full" (`simplify`: randomized
+            shortcuts, B-spline smoothing and vertex reduction, until converged or out of time) or
+            "rope+full" (both, the second in the time left).
+        rope_delta_rad: `ropeShortcutPath`'s spacing of intermediate states (joint-space L2, rad).
+        simplify_time_s: budget of the "full" simplification (s); 0 to skip simplification.
+        validate_resolution_rad: the simplified path is re-checked at this joint resolution (the
+            orchestrator's validator uses 0.01 rad); if it fails, planning is repeated once with
+            `resolution_rad` set to this value. None to skip.
+        interpolate_rad: if set, the returned path is densified so that no joint moves more than
+            this between consecutive waypoints; otherwise the simplified path's waypoints.
+        time_limit_s: the budget of planning + simplification (s); None for the problem's
+            `time_limit_s`.
+        verbose: let OMPL's informational log messages through.
+    """
+
+    range_rad: float | None = None
+    resolution_rad: float = 0.05
+    simplifier: str = "rope"
+    rope_delta_rad: float = 1.0
+    simplify_time_s: float = 0.1
+    validate_resolution_rad: float | None = 0.01
+    interpolate_rad: float | None = None
+    time_limit_s: float | None = None
+    verbose: bool = False
+
+    def __post_init__(self) -> None:
+        if self.range_rad is not None and not self.range_rad > 0:
+            raise SuiteError(f"range_rad must be > 0 or None, got {self.range_rad!r}")
+        if not 0 < self.resolution_rad <= 0.2:
+            raise SuiteError(f"resolution_rad must be in (0, 0.2] rad, got {self.resolution_rad!r}")
+        if self.simplifier not in SIMPLIFIERS:
+            raise SuiteError(f"simplifier must be one of {', '.join(SIMPLIFIERS)}, got {self.simplifier!r}")
+        if not self.rope_delta_rad > 0:
+            raise SuiteError(f"rope_delta_rad must be > 0, got {self.rope_delta_rad!r}")
+        if not self.simplify_time_s >= 0:
+            raise SuiteError(f"simplify_time_s must be >= 0, got {self.simplify_time_s!r}")
+        for name in ("validate_resolution_rad", "interpolate_rad", "time_limit_s"):
+            v = getattr(self, name)
+            if v is not None and not v > 0:
+                raise SuiteError(f"{name} must be > 0 or None, got {v!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class RRTConnectConfig(OmplConfig):
+    """RRT-Connect: stops at its first solution."""
+
+
+@dataclasses.dataclass(frozen=True)
+class RRTstarConfig(OmplConfig):
+    """RRT*: path-length objective, runs to its budget.
+
+    Attributes:
+        rewire_factor: OMPL's rewiring radius factor.
+    """
+
+    # Optimized paths run along obstacles: checked at the validator's resolution from the start.
+    resolution_rad: float = 0.01
+
+    rewire_factor: float = 1.1
+
+
+@dataclasses.dataclass(frozen=True)
+class BITstarConfig(OmplConfig):
+    """BIT*: path-length objective, runs to its budget.
+
+    Attributes:
+        samples_per_batch: samples drawn per batch.
+    """
+
+    # Optimized paths run along obstacles: checked at the validator's resolution from the start.
+    resolution_rad: float = 0.01
+
+    samples_per_batch: int = 100
+
+
+@dataclasses.dataclass(frozen=True)
+class AORRTCConfig(OmplConfig):
+    """AORRTC (asymptotically optimal RRT-Connect): path-length objective, runs to its budget."""
+
+    # Optimized paths run along obstacles: checked at the validator's resolution from the start.
+    resolution_rad: float = 0.01
+
+
+@dataclasses.dataclass(frozen=True)
+class PRMConfig(OmplConfig):
+    """PRM: path-length objective, grows its roadmap until its budget.
+
+    Attributes:
+        max_nearest_neighbors: how many neighbours a new milestone tries to connect to.
+    """
+
+    # Optimized paths run along obstacles: checked at the validator's resolution from the start.
+    resolution_rad: float = 0.01
+
+    max_nearest_neighbors: int = 10
+
+
+# --- OMPL process state ----------------------------------------------------------------------------
+
+
+def _set_ompl_log_level(verbose: bool) -> None:
+    ou.setLogLevel(ou.LOG_INFO if verbose else ou.LOG_WARN)
+
+
+def _reseed_ompl(seed: int) -> None:
+    """Restart OMPL's process-global seed generator at `seed` (1 <= seed < 2**32).
+
+    OMPL logs an error when the seed is set after some RNG exists: RNGs created before keep their
+    streams. Every OMPL object of a trial is created after this call, so that message does not
+    apply here and is held back.
+    """
+    level = ou.getLogLevel()
+    ou.setLogLevel(ou.LOG_NONE)
+    try:
+        ou.RNG.setSeed(int(seed))
+    finally:
+        ou.setLogLevel(level)
+
+
+def trial_seed(problem: PlanningProblem) -> int:
+    """The OMPL seed (1 <= seed < 2**32) of a problem: its `seed` combined with its identity
+    (world, kind, can, start and goal configurations)."""
+    ident = repr((problem.world_key(), problem.kind, problem.can_id)).encode()
+    ident += np.asarray(problem.q_start, float).tobytes()
+    ident += b"" if problem.q_goal is None else np.asarray(problem.q_goal, float).tobytes()
+    words = np.frombuffer(ident + b"\0" * (-len(ident) % 4), dtype=np.uint32)
+    state = np.random.SeedSequence([int(problem.seed) & 0xFFFFFFFF, *words.tolist()]).generate_state(1)
+    return int(state[0]) or 1
+
+
+# --- collision checking ----------------------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=4096)
+def _check_order(n: int) -> np.ndarray:
+    """Sample indices 1..n of a motion in checking order: the end state n, then the others
+    coarsest first (by the power of two dividing them), so a blocked motion fails early."""
+    i = np.arange(1, n)
+    ctz = np.zeros(len(i), int)
+    m = i.copy()
+    while np.any(m % 2 == 0):
+        even = m % 2 == 0
+        ctz[even] += 1
+        m[even] //= 2
+    order = i[np.lexsort((i, -ctz))]
+    return np.concatenate([[n], order])
+
+
+def motion_samples(q0: np.ndarray, q1: np.ndarray, resolution_rad: float) -> np.ndarray:
+    """Samples of the straight motion q0 -> q1 (q0 excluded, q1 first), at most `resolution_rad`
+    apart in every joint, in checking order."""
+    d = q1 - q0
+    n = max(1, math.ceil(float(np.max(np.abs(d))) / resolution_rad))
+    t = _check_order(n) / n
+    return q0 + t[:, None] * d
+
+
+class _BatchMotionValidator(ob.MotionValidator):
+    """Checks a straight motion with batched python-fcl queries instead of one callback per state.
+
+    The start state is taken as valid (as OMPL's DiscreteMotionValidator does).
+    """
+
+    def __init__(self, si: ob.SpaceInformation, world, resolution_rad: float) -> None:
+        super().__init__(si)
+        self.world = world
+        self.resolution_rad = resolution_rad
+        self.motions = 0
+
+    def checkMotion(self, s1, s2) -> bool:  # noqa: N802 (OMPL's name)
+        self.motions += 1
+        Q = motion_samples(np.array(s1[0:DOF]), np.array(s2[0:DOF]), self.resolution_rad)
+        head = Q[:COARSE_BATCH]
+        if self.world.first_collision(head) >= 0:
+            return False
+        return len(Q) <= COARSE_BATCH or self.world.first_collision(Q[COARSE_BATCH:]) < 0
+
+
+def drop_collinear(Q: np.ndarray, *, tol_rad: float = 1e-9) -> np.ndarray:
+    """The waypoints without those that lie on the straight segment between their neighbours
+    (the rope shortcut leaves such states on straight stretches): the same motion."""
+    keep = [0]
+    for i in range(1, len(Q) - 1):
+        a, b, c = Q[keep[-1]], Q[i], Q[i + 1]
+        ac = c - a
+        t = float(np.dot(b - a, ac) / max(float(np.dot(ac, ac)), 1e-300))
+        if not (0.0 <= t <= 1.0 and float(np.max(np.abs(a + t * ac - b))) <= tol_rad):
+            keep.append(i)
+    keep.append(len(Q) - 1)
+    return Q[keep]
+
+
+def _path_array(path: og.PathGeometric) -> np.ndarray:
+    return np.array([s[0:DOF] for s in path.getStates()], float).reshape(-1, DOF)
+
+
+# --- the planners ----------------------------------------------------------------------------------
+
+
+class _OmplPlanner:
+    """One OMPL geometric planner on the problem's python-fcl world (see the module docstring)."""
+
+    name: ClassVar[str]
+    Config: ClassVar[type] = OmplConfig
+    solver: ClassVar[str]
+    optimizing: ClassVar[bool] = True
+    #: whether to report the size of the planner's graph (BIT*'s PlannerData keeps the space
+    #: information alive past the trial; AORRTC reports none)
+    graph_stats: ClassVar[bool] = True
+
+    def __init__(self, config: OmplConfig | None = None) -> None:
+        config = self.Config() if config is None else config
+        if not isinstance(config, self.Config):
+            raise SuiteError(f"planner {self.name!r} takes a {self.Config.__name__}, got {type(config).__name__}")
+        self.config = config
+
+    # subclasses: the OMPL planner object
+    def _make(self, si: ob.SpaceInformation) -> ob.Planner:
+        raise NotImplementedError
+
+    def _planner_stats(self, planner) -> dict[str, Any]:
+        return {}
+
+    def plan(self, problem: PlanningProblem) -> PlanResult:
+        """Plan a collision-free joint path from `problem.q_start` to `problem.q_goal`.
+
+        Returns:
+            SUCCESS with the (N, 7) path (rad) from q_start to q_goal exactly; INVALID_START /
+            INVALID_GOAL / IK_FAILED at once for bad endpoints; TIMEOUT if the budget ran out
+            without an exact solution; NO_SOLUTION if the planner stopped without one.
+        """
+        cfg = self.config
+        _set_ompl_log_level(cfg.verbose)
+        world = collision_world(problem)
+        checks0 = world.checks
+        bad = check_endpoints(problem, world)
+        if bad is not None:
+            return PlanResult(bad.status, None, {**bad.stats, "solver": self.solver,
+                                                  "collision_checks": world.checks - checks0})
+        t0 = time.perf_counter()
+        budget_s = cfg.time_limit_s if cfg.time_limit_s is not None else float(problem.time_limit_s)
+        seed = trial_seed(problem)
+        result = self._attempt(problem, world, resolution_rad=cfg.resolution_rad, budget_s=budget_s, seed=seed)
+        fine = cfg.validate_resolution_rad
+        if result.status is PlanStatus.SUCCESS and fine is not None and fine < cfg.resolution_rad:
+            bad_at = world.path_free(result.path, resolution_rad=fine)
+            if bad_at >= 0:
+                remaining_s = budget_s - (time.perf_counter() - t0)
+                log.info("%s %s: path collides at %.3f rad resolution; replanning at that resolution in %.3f s",
+                         self.name, problem.name, fine, remaining_s)
+                if remaining_s > 0:
+                    retry = self._attempt(problem, world, resolution_rad=fine, budget_s=remaining_s, seed=seed)
+                else:
+                    retry = PlanResult(PlanStatus.TIMEOUT, None, {
+                        **result.stats, "reason": f"path collides at {fine} rad resolution; no time left to replan"})
+                result = dataclasses.replace(retry, stats={**retry.stats, "replanned_fine": True})
+        stats = {**result.stats, "collision_checks": world.checks - checks0, "seed": seed}
+        stats.setdefault("replanned_fine", False)
+        path = result.path
+        if path is not None and cfg.interpolate_rad is not None:
+            path = world.interpolate(path, cfg.interpolate_rad)
+        stats["interpolated"] = cfg.interpolate_rad is not None
+        return PlanResult(result.status, path, stats)
+
+    def _attempt(self, problem: PlanningProblem, world, *, resolution_rad: float, budget_s: float,
+                 seed: int) -> PlanResult:
+        """One OMPL solve + simplification; every OMPL object lives only inside this call."""
+        cfg = self.config
+        _reseed_ompl(seed)
+        simplify_budget_s = min(cfg.simplify_time_s, 0.5 * budget_s)
+        solve_budget_s = budget_s - simplify_budget_s
+        lo, hi = world.robot.lower_rad, world.robot.upper_rad
+
+        space = ob.RealVectorStateSpace(DOF)
+        bounds = ob.RealVectorBounds(DOF)
+        for i in range(DOF):
+            bounds.setLow(i, float(lo[i]))
+            bounds.setHigh(i, float(hi[i]))
+        space.setBounds(bounds)
+        si = ob.SpaceInformation(space)
+        si.setStateValidityChecker(lambda s: world.is_free(np.array(s[0:DOF])))
+        validator = _BatchMotionValidator(si, world, resolution_rad)
+        si.setMotionValidator(validator)
+        si.setup()
+        start, goal = si.allocState(), si.allocState()  # freed by their owners when released
+        start[0:DOF] = [float(v) for v in problem.q_start]
+        goal[0:DOF] = [float(v) for v in problem.q_goal]
+        pdef = ob.ProblemDefinition(si)
+        pdef.setStartAndGoalStates(start, goal)
+        objective = ob.PathLengthOptimizationObjective(si) if self.optimizing else None
+        if objective is not None:
+            pdef.setOptimizationObjective(objective)
+        planner = self._make(si)
+        planner.setProblemDefinition(pdef)
+        planner.setup()
+        stats: dict[str, Any] = {"solver": self.solver, "resolution_rad": resolution_rad}
+        path = simplifier = None
+        try:
+            t_solve = time.perf_counter()
+            status = planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
+            solve_time_s = time.perf_counter() - t_solve
+            code = status.getStatus()
+            T = ob.PlannerStatus.PlannerStatusType
+            stats.update(solve_time_s=solve_time_s, solver_status=status.asString(),
+                         motion_checks=validator.motions, **self._planner_stats(planner))
+            if self.graph_stats:
+                data = ob.PlannerData(si)
+                planner.getPlannerData(data)
+                stats["graph_vertices"] = data.numVertices()
+                del data
+            if code != T.EXACT_SOLUTION or not pdef.hasExactSolution():
+                out_of_time = solve_time_s >= solve_budget_s * 0.999
+                if code in (T.TIMEOUT, T.APPROXIMATE_SOLUTION) and out_of_time:
+                    return PlanResult(PlanStatus.TIMEOUT, None, stats)
+                if code == T.CRASH:
+                    return PlanResult(PlanStatus.ERROR, None, stats)
+                return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
+
+            path = og.PathGeometric(pdef.getSolutionPath())
+            stats["length_before_rad"] = path.length()
+            stats["waypoints_before"] = path.getStateCount()
+            if objective is not None:
+                stats["best_cost"] = path.cost(objective).value()
+            t_simp = time.perf_counter()
+            if simplify_budget_s > 0:
+                simplifier = og.PathSimplifier(si)
+                if cfg.simplifier in ("rope", "rope+full"):
+                    simplifier.ropeShortcutPath(path, cfg.rope_delta_rad)
+                left_s = simplify_budget_s - (time.perf_counter() - t_simp)
+                if cfg.simplifier in ("full", "rope+full") and left_s > 0:
+                    simplifier.simplify(path, ob.timedPlannerTerminationCondition(left_s))
+            stats["simplify_time_s"] = time.perf_counter() - t_simp
+            stats["length_after_rad"] = path.length()
+            stats["motion_checks"] = validator.motions
+            Q = drop_collinear(_path_array(path))
+            stats["waypoints"] = len(Q)
+        finally:
+            # Release in dependency order: paths and simplifier, the planner's data and problem,
+            # then the problem definition, the space information and the space.
+            del path, simplifier
+            planner.clear()
+            pdef.clearSolutionPaths()
+            del planner, objective, pdef, start, goal, validator, si, space, bounds
+
+        # The path runs between the very start and goal states; snap away float noise, if any.
+        for end, q in ((0, problem.q_start), (-1, problem.q_goal)):
+            err = float(np.max(np.abs(Q[end] - q)))
+            if err > 1e-9:
+                return PlanResult(PlanStatus.ERROR, None, {**stats, "reason": f"path end off by {err:.3g} rad"})
+            Q[end] = q
+        return PlanResult(PlanStatus.SUCCESS, Q, stats)
+
+
+class RRTConnectPlanner(_OmplPlanner):
+    """OMPL RRT-Connect (the paper's baseline planner): the first solution, then simplification."""
+
+    name = "rrt"
+    Config = RRTConnectConfig
+    solver = "RRTConnect"
+    optimizing = False
+
+    def _make(self, si):
+        p = og.RRTConnect(si)
+        if self.config.range_rad is not None:
+            p.setRange(self.config.range_rad)
+        return p
+
+
+class RRTstarPlanner(_OmplPlanner):
+    """OMPL RRT* with the path-length objective, run to its budget."""
+
+    name = "rrtstar"
+    Config = RRTstarConfig
+    solver = "RRTstar"
+
+    def _make(self, si):
+        p = og.RRTstar(si)
+        if self.config.range_rad is not None:
+            p.setRange(self.config.range_rad)
+        p.setRewireFactor(self.config.rewire_factor)
+        return p
+
+    def _planner_stats(self, planner):
+        return {"iterations": planner.numIterations()}
+
+
+class BITstarPlanner(_OmplPlanner):
+    """OMPL BIT* with the path-length objective, run to its budget."""
+
+    name = "bitstar"
+    Config = BITstarConfig
+    solver = "BITstar"
+    graph_stats = False
+
+    def _make(self, si):
+        p = og.BITstar(si)
+        p.setSamplesPerBatch(self.config.samples_per_batch)
+        p.setConsiderApproximateSolutions(False)
+        return p
+
+    def _planner_stats(self, planner):
+        return {"iterations": planner.numIterations(), "batches": planner.numBatches()}
+
+
+class AORRTCPlanner(_OmplPlanner):
+    """OMPL AORRTC (asymptotically optimal RRT-Connect) with the path-length objective, run to its
+    budget."""
+
+    name = "aorrtc"
+    Config = AORRTCConfig
+    solver = "AORRTC"
+    graph_stats = False
+
+    def _make(self, si):
+        p = og.AORRTC(si)
+        if self.config.range_rad is not None:
+            p.setRange(self.config.range_rad)
+        return p
+
+
+class PRMPlanner(_OmplPlanner):
+    """OMPL PRM with the path-length objective: grows its roadmap until its budget."""
+
+    name = "prm"
+    Config = PRMConfig
+    solver = "PRM"
+
+    def _make(self, si):
+        p = og.PRM(si)
+        p.setMaxNearestNeighbors(self.config.max_nearest_neighbors)
+        return p
+
+    def _planner_stats(self, planner):
+        return {"iterations": planner.milestoneCount(), "roadmap_edges": planner.edgeCount()}
