@@ -5,11 +5,27 @@ It answers three questions for the sampling planners, the validator and the metr
 - what is the signed clearance between robot (with a held can) and scene, in metres?
 - is the straight joint-space motion between two configurations free at a given resolution?
 
-Speed comes from doing the Python bookkeeping in a few numpy calls: forward kinematics for all
-links at once (`RobotModel.link_poses`), then a conservative prefilter with bounding spheres
-against the scene's axis-aligned boxes and between robot parts, and exact FCL queries only for
-the few pairs the prefilter cannot clear. Batches of states (motions, paths) go through the same
-path vectorized over states.
+A state check costs a fixed, small number of numpy calls (the cost of a call, not the
+arithmetic, dominates at this size), then exact FCL queries only for the few pairs nothing
+cheaper can decide:
+
+1. Kinematics on points. Every point the checks need (bounding-sphere centres, and the four
+   rows of each part's pose) is stored as a homogeneous row in its link's frame; rows are
+   ordered from the hand down to the base, so applying the local joint transforms from joint 7
+   to joint 1 is seven `np.dot` calls on growing leading blocks of one array.
+2. Bounding spheres. Each primitive is covered by spheres (outer radius) that also contain an
+   inner ball lying inside the primitive (inner radius). One pass over all (sphere, obstacle-box)
+   and (sphere, sphere) pairs gives squared distances: no outer overlap means free; an inner
+   overlap with a true box or another robot part means a certain collision.
+3. Joint-space tables. A self pair whose relative pose depends on at most two joints (after
+   dropping a joint about whose axis a shape is round, e.g. link 5 against link 7 depends on
+   q6 only) gets a table over those joints, proved once per process by FCL distances and a
+   Lipschitz bound: cells where the pair cannot touch are skipped without an exact query.
+   These are the wrist pairs whose spheres always overlap (their flat faces sit millimetres
+   apart).
+4. Exact FCL `collide` for what remains.
+
+None of the shortcuts changes an answer: each one only skips a query whose result it has proved.
 
 Filtering mirrors the Drake scene: pairs joined by a joint, the always-touching pairs of
 `robot_model.ALWAYS_TOUCHING`, the rigid gripper assembly (link 7, gripper body, fingers, held
@@ -19,17 +35,31 @@ from.
 
 from __future__ import annotations
 
+import itertools
 import math
+from typing import NamedTuple
 
 import fcl
 import numpy as np
 
-from scenes.robot_model import RobotModel, Shape, load_robot
+from scenes.robot_model import RobotModel, load_robot
 from scenes.scene import HeldCan, Scene
 
 #: Bodies that form one rigid assembly with the gripper (Drake filters welded assemblies).
 GRIPPER_ASSEMBLY = frozenset({"iiwa_link_7", "body", "left_finger", "right_finger", "held_can"})
 G_INDEX = 8  # index of the gripper body in RobotModel.link_poses
+
+#: Spacing of the spheres covering a cylinder or capsule along its axis, as a fraction of its
+#: radius (outer radius sqrt(1 + f^2 / 4) r: 3% above r for f = 0.5), for pairs with the scene
+#: (fine: the scene is where most near misses happen) and between robot parts (coarse: few pairs).
+ENV_SPACING = 0.5
+SELF_SPACING = 2.0
+#: Cells of a self-pair table over its one joint.
+TABLE_CELLS = 1024
+#: A table cell is safe only if the pair's distance bound exceeds this (FCL's own tolerance is far smaller).
+TABLE_MARGIN_M = 1e-4
+#: States per chunk in the batched checks (bounds memory; a colliding early chunk ends the scan).
+CHUNK = 64
 
 
 def _fcl_geometry(kind: str, dims) -> fcl.CollisionGeometry:
@@ -44,35 +74,182 @@ def _fcl_geometry(kind: str, dims) -> fcl.CollisionGeometry:
     raise ValueError(f"unsupported shape {kind!r}")
 
 
-def _cover_spheres(kind: str, dims) -> tuple[np.ndarray, np.ndarray]:
-    """Spheres (centres in the shape frame, radii) that together enclose the shape.
+def _cover_spheres(kind: str, dims, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Spheres covering a primitive: centres (k, 3) in the shape frame, outer and inner radii (k,).
 
-    A cylinder or capsule of radius r and length L is cut into k slices of length 2h; a slice
-    lies within sqrt(r^2 + h^2) of its centre. A capsule's end caps lie within r of the segment's
-    end points.
+    The union of the outer spheres encloses the shape; each inner ball (same centre) lies inside
+    it. A capsule of radius r is covered by spheres of radius sqrt(r^2 + h^2) centred on its
+    segment at most 2h = spacing * r apart, end points included; a cylinder likewise by slices
+    of length 2h. A box is cut along its longest side into pieces no longer than spacing times
+    its middle side, each enclosed by its half-diagonal.
     """
-    if kind == "box":
-        return np.zeros((1, 3)), np.array([0.5 * math.sqrt(sum(d * d for d in dims))])
     if kind == "sphere":
-        return np.zeros((1, 3)), np.array([dims[0]])
+        return np.zeros((1, 3)), np.array([dims[0]]), np.array([dims[0]])
+    if kind == "box":
+        size = np.asarray(dims, float)
+        ax = int(np.argmax(size))
+        mid = np.sort(size)[1]
+        k = max(1, math.ceil(size[ax] / (2 * spacing * mid)))
+        piece = size.copy()
+        piece[ax] /= k
+        t = -size[ax] / 2 + piece[ax] * (np.arange(k) + 0.5)
+        centres = np.zeros((k, 3))
+        centres[:, ax] = t
+        outer = np.full(k, 0.5 * float(np.linalg.norm(piece)))
+        others = [0.5 * size[i] for i in range(3) if i != ax]
+        inner = np.minimum(min(others), size[ax] / 2 - np.abs(t))
+        return centres, outer, inner
     r, length = dims
-    k = max(1, math.ceil(length / (1.5 * r)))
+    k = max(1, math.ceil(length / (spacing * r)))
     h = length / (2 * k)
-    z = -length / 2 + h + 2 * h * np.arange(k)
-    centres = np.column_stack([np.zeros(k), np.zeros(k), z])
-    radii = np.full(k, math.sqrt(r * r + h * h))
     if kind == "capsule":
-        centres = np.vstack([centres, [[0.0, 0.0, -length / 2], [0.0, 0.0, length / 2]]])
-        radii = np.concatenate([radii, [r, r]])
-    return centres, radii
+        z = np.linspace(-length / 2, length / 2, k + 1)
+        return np.column_stack([0 * z, 0 * z, z]), np.full(k + 1, math.hypot(r, h)), np.full(k + 1, r)
+    if kind == "cylinder":
+        z = -length / 2 + h + 2 * h * np.arange(k)
+        inner = np.minimum(r, length / 2 - np.abs(z))
+        return np.column_stack([0 * z, 0 * z, z]), np.full(k, math.hypot(r, h)), inner
+    raise ValueError(f"unsupported shape {kind!r}")
+
+
+def _bounding_radius(kind: str, dims) -> float:
+    """Radius of the smallest sphere about the shape's origin that encloses it."""
+    if kind == "box":
+        return 0.5 * math.sqrt(sum(d * d for d in dims))
+    if kind == "sphere":
+        return dims[0]
+    r, length = dims
+    return r + length / 2 if kind == "capsule" else math.hypot(r, length / 2)
 
 
 class _Part:
-    __slots__ = ("name", "body", "X_BS", "obj", "geom")
+    """One collision primitive of the robot, riding on FK body `body` (0..8)."""
 
-    def __init__(self, name: str, body: int, X_BS: np.ndarray, geom: fcl.CollisionGeometry):
-        self.name, self.body, self.X_BS, self.geom = name, body, X_BS, geom
-        self.obj = fcl.CollisionObject(geom, fcl.Transform())
+    __slots__ = ("name", "body", "link", "kind", "dims", "X_BS", "X_LS", "obj", "geom")
+
+    def __init__(self, name: str, body: int, X_BS: np.ndarray, kind: str, dims, X_7G: np.ndarray):
+        self.name, self.body, self.X_BS, self.kind, self.dims = name, body, X_BS, kind, tuple(dims)
+        # The chain link it moves with (the gripper body is welded to link 7) and its pose there.
+        self.link = min(body, 7)
+        self.X_LS = X_7G @ X_BS if body == G_INDEX else X_BS
+        self.geom = _fcl_geometry(kind, dims)
+        self.obj = fcl.CollisionObject(self.geom, fcl.Transform())
+
+    @property
+    def prim(self) -> _Prim:
+        return _Prim(self.kind, self.dims, self.link, self.X_LS)
+
+
+class _Prim(NamedTuple):
+    """A primitive fixed to chain link `link` (0..7) at pose X_LS."""
+
+    kind: str
+    dims: tuple
+    link: int
+    X_LS: np.ndarray
+
+
+class _PairTable:
+    """Cells of one joint's range where a self pair is proved apart: `safe(q)` for q as a list."""
+
+    __slots__ = ("joint", "lower_rad", "cells_per_rad", "cells")
+
+    def __init__(self, joint: int, lower_rad: float, cells_per_rad: float, cells: bytearray):
+        self.joint, self.lower_rad, self.cells_per_rad, self.cells = joint, lower_rad, cells_per_rad, cells
+
+    @property
+    def always_safe(self) -> bool:
+        return all(self.cells)
+
+    def safe(self, q: list[float]) -> bool:
+        x = (q[self.joint] - self.lower_rad) * self.cells_per_rad if self.joint >= 0 else 0.0
+        return 0.0 <= x < len(self.cells) and bool(self.cells[int(x)])
+
+
+_TABLES: dict[tuple, _PairTable | None] = {}
+
+
+def _on_axis(prim: _Prim, X_axis: np.ndarray) -> bool:
+    """True if the primitive is round about the z axis of frame X_axis (both in one link frame)."""
+    if prim.kind not in ("sphere", "cylinder", "capsule"):
+        return False
+    d, o = X_axis[:3, 2], X_axis[:3, 3]
+    off = prim.X_LS[:3, 3] - o
+    if np.linalg.norm(off - d * (off @ d)) > 1e-9:
+        return False
+    return prim.kind == "sphere" or abs(abs(prim.X_LS[:3, 2] @ d) - 1.0) < 1e-12
+
+
+def _revolved(prim: _Prim) -> _Prim:
+    """A cylinder about its link's z axis enclosing a box in every turn of that link's joint."""
+    corners = np.array(list(itertools.product(*[(-d / 2, d / 2) for d in prim.dims])))
+    c_L = corners @ prim.X_LS[:3, :3].T + prim.X_LS[:3, 3]
+    radius = float(np.max(np.hypot(c_L[:, 0], c_L[:, 1])))
+    z0, z1 = float(c_L[:, 2].min()), float(c_L[:, 2].max())
+    X = np.eye(4)
+    X[2, 3] = (z0 + z1) / 2
+    return _Prim("cylinder", (radius, z1 - z0), prim.link, X)
+
+
+def _pair_table(robot: RobotModel, a: _Prim, b: _Prim) -> _PairTable | None:
+    """A proved table for self pair (a, b), a on the lower link, over the one joint their
+    distance depends on, or None when it depends on more. Cached per process."""
+    key = (id(robot), robot.joints[0].X_origin.tobytes(), a.kind, a.dims, a.link, a.X_LS.round(12).tobytes(),
+           b.kind, b.dims, b.link, b.X_LS.round(12).tobytes())
+    if key in _TABLES:
+        return _TABLES[key]
+    joints = list(range(a.link, b.link))  # q indices of joints a.link + 1 .. b.link
+    if joints and _on_axis(a, robot.joints[joints[0]].X_origin):
+        joints = joints[1:]  # a is round about the first joint: its angle does not matter
+    if joints and joints[-1] == b.link - 1 and not _on_axis(b, np.eye(4)) and len(joints) == 2 and b.kind == "box":
+        b = _revolved(b)  # bound b over its own joint's turn
+    if joints and joints[-1] == b.link - 1 and _on_axis(b, np.eye(4)):
+        joints = joints[:-1]
+    table = _build_table(robot, a, b, joints[0] if joints else -1) if len(joints) <= 1 else None
+    _TABLES[key] = table
+    return table
+
+
+def _build_table(robot: RobotModel, a: _Prim, b: _Prim, joint: int) -> _PairTable:
+    """Prove cells apart by the FCL signed distance at a run of cells' centre minus a Lipschitz
+    bound, halving runs only where unproved.
+
+    Turning joint `joint` by dq moves any point p of b by at most |dq| |p - o| (o, the origin of
+    the link it turns, lies on its axis); |p - o| is bounded by the joint offsets from o to b's
+    link plus b's reach from that link's origin.
+    """
+    req = fcl.DistanceRequest(enable_signed_distance=True)
+    oa = fcl.CollisionObject(_fcl_geometry(a.kind, a.dims), fcl.Transform())
+    ob = fcl.CollisionObject(_fcl_geometry(b.kind, b.dims), fcl.Transform())
+    q = np.zeros(7)
+
+    def dist(q_j: float) -> float:
+        if joint >= 0:
+            q[joint] = q_j
+        X = robot.link_poses(q)
+        Xa, Xb = X[a.link] @ a.X_LS, X[b.link] @ b.X_LS
+        oa.setTransform(fcl.Transform(Xa[:3, :3], Xa[:3, 3]))
+        ob.setTransform(fcl.Transform(Xb[:3, :3], Xb[:3, 3]))
+        return float(fcl.distance(oa, ob, req, fcl.DistanceResult()))
+
+    if joint < 0:
+        return _PairTable(-1, 0.0, 0.0, bytearray([dist(0.0) > TABLE_MARGIN_M]))
+    reach = float(np.linalg.norm(b.X_LS[:3, 3])) + _bounding_radius(b.kind, b.dims)
+    rho = reach + sum(float(np.linalg.norm(robot.joints[m].X_origin[:3, 3])) for m in range(joint + 1, b.link))
+    n = TABLE_CELLS
+    lo = robot.joints[joint].lower_rad
+    step = (robot.joints[joint].upper_rad - lo) / n
+    cells = bytearray(n)
+    stack = [(0, n)]
+    while stack:
+        i0, i1 = stack.pop()
+        d = dist(lo + (i0 + i1) / 2 * step)
+        bound = rho * (i1 - i0) / 2 * step
+        if d - bound > TABLE_MARGIN_M:
+            cells[i0:i1] = b"\x01" * (i1 - i0)
+        elif d + bound >= 0 and i1 - i0 > 1:  # else it collides throughout, or one unproved cell
+            stack += [(i0, (i0 + i1) // 2), ((i0 + i1) // 2, i1)]
+    return _PairTable(joint, lo, 1.0 / step, cells)
 
 
 class CollisionWorld:
@@ -110,38 +287,21 @@ class CollisionWorld:
                 body, X_BS = G_INDEX, finger_X[sh.body] @ sh.X_BS
             else:
                 body, X_BS = robot.body_index(sh.body), sh.X_BS
-            parts.append(_Part(sh.body, body, X_BS, _fcl_geometry(sh.kind, sh.dims)))
+            parts.append(_Part(sh.body, body, X_BS, sh.kind, sh.dims, robot.X_7G))
         if held is not None:
-            held_shape = Shape("held_can", "cylinder", (spec.can.radius_m, spec.can.height_m), held.X_GC)
-            parts.append(_Part("held_can", G_INDEX, held.X_GC, _fcl_geometry("cylinder", held_shape.dims)))
+            can_dims = (spec.can.radius_m, spec.can.height_m)
+            parts.append(_Part("held_can", G_INDEX, held.X_GC, "cylinder", can_dims, robot.X_7G))
         self.parts = parts
-        sph_c, sph_r, sph_part = [], [], []
-        for i, p in enumerate(parts):
-            if p.name == "held_can":
-                kind, dims = "cylinder", (spec.can.radius_m, spec.can.height_m)
-            else:
-                sh = next(s for s in robot.shapes if s.body == p.name and np.allclose(
-                    (finger_X[s.body] @ s.X_BS) if s.body in finger_X else s.X_BS, p.X_BS))
-                kind, dims = sh.kind, sh.dims
-            c, r = _cover_spheres(kind, dims)
-            c_B = (p.X_BS[:3, :3] @ c.T).T + p.X_BS[:3, 3]
-            sph_c.append(c_B)
-            sph_r.append(r)
-            sph_part += [i] * len(r)
-        self._sph_c = np.vstack(sph_c)  # sphere centres in their body frame
-        self._sph_r = np.concatenate(sph_r)
-        self._sph_part = np.array(sph_part)
-        self._sph_body = np.array([parts[i].body for i in sph_part])
 
-        # --- scene objects ---
+        # --- scene objects, with their axis-aligned boxes (exact for the static boxes) ---
         self.obstacles: list[tuple[str, fcl.CollisionObject]] = []
-        lo, hi = [], []
+        obs_c, obs_h, obs_exact = [], [], []
         for name, box in spec.static_boxes().items():
-            c = np.asarray(box.center_m)
-            h = np.asarray(box.size_m) / 2
+            c = np.asarray(box.center_m, float)
             self.obstacles.append((name, fcl.CollisionObject(fcl.Box(*box.size_m), fcl.Transform(c))))
-            lo.append(c - h)
-            hi.append(c + h)
+            obs_c.append(c)
+            obs_h.append(np.asarray(box.size_m, float) / 2)
+            obs_exact.append(True)
         removed = set(removed_can_ids) | ({held.can.id} if held is not None else set())
         r_can, h_can = spec.can.radius_m, spec.can.height_m
         for can in scene.cans:
@@ -152,119 +312,303 @@ class CollisionWorld:
                 (f"can_{can.id}", fcl.CollisionObject(fcl.Cylinder(r_can, h_can), fcl.Transform(X[:3, :3], X[:3, 3])))
             )
             axis = X[:3, 2]
-            ext = np.abs(axis) * h_can / 2 + r_can * np.sqrt(np.maximum(0.0, 1 - axis**2))
-            lo.append(X[:3, 3] - ext)
-            hi.append(X[:3, 3] + ext)
-        self._lo = np.array(lo)
-        self._hi = np.array(hi)
+            obs_c.append(X[:3, 3].copy())
+            obs_h.append(np.abs(axis) * h_can / 2 + r_can * np.sqrt(np.maximum(0.0, 1 - axis**2)))
+            obs_exact.append(False)
 
         # --- which (part, obstacle) and (part, part) pairs count ---
-        n_parts, n_obs = len(parts), len(self.obstacles)
-        allowed = np.ones((n_parts, n_obs), bool)
-        for i, p in enumerate(parts):
-            if p.name == "iiwa_link_0":
-                allowed[i, :] = False  # the base is welded to the static world
-            if p.name == "held_can":
-                for k, (oname, _) in enumerate(self.obstacles):
-                    if oname == "plate":
-                        allowed[i, k] = False  # it rests on the plate at the grasp
-        self._allowed_obs = allowed
-        self._sph_allowed_obs = allowed[self._sph_part]  # (S, O)
         self_pairs = []
-        for i in range(n_parts):
-            for j in range(i + 1, n_parts):
-                a, b = parts[i].name, parts[j].name
-                if a == b or frozenset((a, b)) in robot.filtered_pairs:
-                    continue
-                if a in GRIPPER_ASSEMBLY and b in GRIPPER_ASSEMBLY:
-                    continue
-                self_pairs.append((i, j))
+        for i, j in itertools.combinations(range(len(parts)), 2):
+            a, b = parts[i].name, parts[j].name
+            if a == b or frozenset((a, b)) in robot.filtered_pairs:
+                continue
+            if a in GRIPPER_ASSEMBLY and b in GRIPPER_ASSEMBLY:
+                continue
+            self_pairs.append((i, j))
         self.self_pairs = self_pairs
-        pair_set = {p: k for k, p in enumerate(self_pairs)}
-        si, sj, spair = [], [], []
-        for s1 in range(len(self._sph_r)):
-            for s2 in range(len(self._sph_r)):
-                key = (int(self._sph_part[s1]), int(self._sph_part[s2]))
-                if key in pair_set:
-                    si.append(s1)
-                    sj.append(s2)
-                    spair.append(pair_set[key])
-        self._ss_i, self._ss_j = np.array(si, int), np.array(sj, int)
-        self._ss_pair = np.array(spair, int)
-        self._ss_thr2 = (self._sph_r[self._ss_i] + self._sph_r[self._ss_j]) ** 2
+        env_pairs = [
+            (i, k)
+            for i, p in enumerate(parts)
+            if p.name != "iiwa_link_0"  # the base is welded to the static world
+            for k, (oname, _) in enumerate(self.obstacles)
+            if not (p.name == "held_can" and oname == "plate")  # it rests on the plate at the grasp
+        ]
+        self._build_rows()
+        self._build_pairs(env_pairs, self_pairs, obs_c, obs_h, obs_exact)
+        self._build_fk()
         self._req = fcl.CollisionRequest()
         self._dreq = fcl.DistanceRequest(enable_signed_distance=True)
         self.checks = 0  # state checks answered, for planner statistics
 
+    # --- construction -----------------------------------------------------------------------------
+
+    def _build_rows(self) -> None:
+        """Homogeneous rows in link frames, hand first: each part's pose columns, its spheres for
+        the scene pairs, its spheres for the self pairs."""
+        rows: list[np.ndarray] = []
+        n = len(self.parts)
+        self._frame_row = [0] * n
+        self._spheres: dict[str, list] = {"env": [None] * n, "self": [None] * n}  # (rows, outer, inner)
+        link_end = [0] * 8
+        for link in range(7, -1, -1):
+            for p, part in enumerate(self.parts):
+                if part.link != link:
+                    continue
+                self._frame_row[p] = len(rows)
+                rows.extend(part.X_LS.T)  # R[:, 0], R[:, 1], R[:, 2] (w = 0) and p (w = 1)
+                for use, spacing in (("env", ENV_SPACING), ("self", SELF_SPACING)):
+                    c, outer, inner = _cover_spheres(part.kind, part.dims, spacing)
+                    c_L = c @ part.X_LS[:3, :3].T + part.X_LS[:3, 3]
+                    self._spheres[use][p] = (np.arange(len(rows), len(rows) + len(c)), outer, inner)
+                    rows.extend(np.column_stack([c_L, np.ones(len(c))]))
+            link_end[link] = len(rows)
+        self._rows0 = np.array(rows, float)
+        self._link_end = link_end
+
+    def _build_pairs(self, env_pairs, self_pairs, obs_c, obs_h, obs_exact) -> None:
+        """Sphere-level pairs as arrays (scene pairs as a spheres x obstacles grid, then self
+        pairs); each part-level pair gets an id, and the self pairs with a table leave the
+        sphere test for their table."""
+        self._pp_part: list[int] = []
+        self._pp_other: list[tuple[int, fcl.CollisionObject | None]] = []
+
+        def new_pair(i, other) -> int:
+            self._pp_part.append(i)
+            self._pp_other.append(other)
+            return len(self._pp_part) - 1
+
+        n_obs = len(self.obstacles)
+        env_parts = sorted({i for i, _ in env_pairs})
+        rows_e, outer_e, inner_e, part_e = [], [], [], []
+        for i in env_parts:
+            r, outer, inner = self._spheres["env"][i]
+            rows_e.append(r)
+            outer_e.append(outer)
+            inner_e.append(inner)
+            part_e += [i] * len(r)
+        self._env_rows = np.concatenate(rows_e).astype(np.intp)
+        outer_e, inner_e, part_e = np.concatenate(outer_e), np.concatenate(inner_e), np.array(part_e)
+        S = len(self._env_rows)
+        pp_grid = np.full((len(self.parts), n_obs), -1)
+        for i, k in env_pairs:
+            pp_grid[i, k] = new_pair(i, (-1, self.obstacles[k][1]))
+        pp_env = pp_grid[part_e]  # (S, O); -1 where the pair does not count
+        allowed = pp_env >= 0
+        R2_env = np.where(allowed, outer_e[:, None] ** 2, -1.0)
+        exact = np.asarray(obs_exact)[None, :]  # a can's box only bounds the can: no inner test
+        rho2_env = np.where(allowed & exact, inner_e[:, None] ** 2, -1.0)
+        self._n_env_pp = len(self._pp_part)
+        self._obs_c = np.array(obs_c)
+        self._obs_h = np.array(obs_h)
+
+        ia, ib, r2, rho2, pp = [], [], [], [], []
+        tables = []
+        for i, j in self_pairs:
+            a, b = self.parts[i], self.parts[j]
+            if a.link > b.link:
+                i, j, a, b = j, i, b, a
+            table = None if "held_can" in (a.name, b.name) else _pair_table(self.robot, a.prim, b.prim)
+            if table is not None and table.always_safe:
+                continue  # they never touch within the joint limits
+            k = new_pair(i, (j, None))
+            if table is not None:
+                tables.append((table.joint, table.lower_rad, table.cells_per_rad, len(table.cells), table.cells, k))
+                continue
+            (ri, oi, ni), (rj, oj, nj) = self._spheres["self"][i], self._spheres["self"][j]
+            si, sj = np.meshgrid(ri, rj, indexing="ij")
+            ia.append(si.ravel())
+            ib.append(sj.ravel())
+            r2.append(np.add.outer(oi, oj).ravel() ** 2)
+            rho2.append(np.add.outer(ni, nj).ravel() ** 2)
+            pp.append(np.full(si.size, k))
+        self._tables = tables
+        self._iab_self = np.stack([np.concatenate(ia), np.concatenate(ib)]).astype(np.intp)
+        self._R2 = np.concatenate([R2_env.ravel()] + r2)
+        self._rho2 = np.concatenate([rho2_env.ravel()] + rho2)
+        self._pp = np.concatenate([pp_env.ravel()] + pp).astype(np.intp)
+        self._n_env = S * n_obs
+        Ps = self._iab_self.shape[1]
+        # work buffers of the single-state path (views created once)
+        # Same-shape arrays throughout: numpy broadcasting over a last axis of 3 is slow.
+        self._env_rep = np.repeat(self._env_rows, n_obs)
+        self._obs_c4 = np.tile(np.column_stack([self._obs_c, np.ones(n_obs)]), (S, 1))
+        self._obs_h4 = np.tile(np.column_stack([self._obs_h, np.zeros(n_obs)]), (S, 1))
+        self._De = np.empty((S * n_obs, 4))
+        self._Ze = np.zeros((S * n_obs, 4))
+        self._Gs = np.empty((2, Ps, 4))
+        self._Gs0, self._Gs1 = self._Gs[0], self._Gs[1]
+        self._Ds = np.empty((Ps, 4))
+        self._d2 = np.empty(self._n_env + Ps)
+        self._d2e, self._d2s = self._d2[: self._n_env], self._d2[self._n_env :]
+        self._mask = np.empty(len(self._d2), bool)
+        self._ones4 = np.ones(4)
+
+    def _build_fk(self) -> None:
+        """X_origin Rz(q) = O Ec cos q + O Es sin q + O E1; stored transposed, one row per entry."""
+        Ec = np.diag([1.0, 1.0, 0.0, 0.0])
+        Es = np.zeros((4, 4))
+        Es[0, 1], Es[1, 0] = -1.0, 1.0
+        E1 = np.diag([0.0, 0.0, 1.0, 1.0])
+        M = np.zeros((7 * 16, 15))
+        for k, joint in enumerate(self.robot.joints):
+            O = joint.X_origin
+            M[16 * k : 16 * k + 16, k] = (O @ Ec).T.ravel()
+            M[16 * k : 16 * k + 16, 7 + k] = (O @ Es).T.ravel()
+            M[16 * k : 16 * k + 16, 14] = (O @ E1).T.ravel()
+        self._M = M
+        self._cs = np.zeros(15)
+        self._cs[14] = 1.0
+        self._cos, self._sin = self._cs[:7], self._cs[7:14]
+        self._LT = np.empty((7, 4, 4))
+        self._LT_flat = self._LT.reshape(112)
+        self._buf0 = np.stack([self._rows0, self._rows0])
+        self._buf = self._buf0.copy()
+        # joint k turns the rows of links >= k: read buffer k % 2, write buffer (k - 1) % 2
+        self._steps = [
+            (self._buf[k % 2, : self._link_end[k]], self._LT[k - 1], self._buf[(k - 1) % 2, : self._link_end[k]])
+            for k in range(7, 0, -1)
+        ]
+        self._rows = self._buf[0]
+
     # --- kinematics -----------------------------------------------------------------------------
 
-    def _sphere_centres(self, X_WB: np.ndarray) -> np.ndarray:
-        """World centres of all bounding spheres, (S, 3) or (M, S, 3) for a batch of poses."""
-        X = X_WB[..., self._sph_body, :, :]
-        return np.einsum("...ij,...j->...i", X[..., :3, :3], self._sph_c) + X[..., :3, 3]
+    def _state_rows(self, q) -> np.ndarray:
+        """All rows in the world frame for one configuration (a view of a work buffer)."""
+        np.cos(q, out=self._cos)
+        np.sin(q, out=self._sin)
+        np.dot(self._M, self._cs, out=self._LT_flat)
+        np.copyto(self._buf, self._buf0)
+        for src, LT, dst in self._steps:
+            np.dot(src, LT, out=dst)
+        return self._rows
 
-    def _place(self, part: _Part, X_WB: np.ndarray) -> fcl.CollisionObject:
-        X = X_WB[part.body] @ part.X_BS
-        part.obj.setTransform(fcl.Transform(X[:3, :3], X[:3, 3]))
-        return part.obj
+    def _batch_rows(self, Q: np.ndarray) -> np.ndarray:
+        """All rows in the world frame for a batch (M, 7): (M, rows, 4)."""
+        m = len(Q)
+        cs = np.empty((m, 15))
+        cs[:, :7] = np.cos(Q)
+        cs[:, 7:14] = np.sin(Q)
+        cs[:, 14] = 1.0
+        LT = (cs @ self._M.T).reshape(m, 7, 4, 4)
+        buf = np.empty((m,) + self._rows0.shape)
+        buf[:] = self._rows0
+        for k in range(7, 0, -1):
+            e = self._link_end[k]
+            buf[:, :e] = np.matmul(buf[:, :e], LT[:, k - 1])
+        return buf
+
+    def _place(self, p: int, rows: np.ndarray) -> fcl.CollisionObject:
+        f = self._frame_row[p]
+        obj = self.parts[p].obj
+        obj.setRotation(np.ascontiguousarray(rows[f : f + 3, :3].T))
+        obj.setTranslation(rows[f + 3, :3])
+        return obj
 
     # --- state checks ---------------------------------------------------------------------------
 
-    def _candidates(self, centres: np.ndarray):
-        """Candidate (part, obstacle) and self pairs whose bounding spheres overlap."""
-        d = np.maximum(np.maximum(self._lo - centres[..., :, None, :], centres[..., :, None, :] - self._hi), 0.0)
-        near = (np.einsum("...k,...k->...", d, d) <= (self._sph_r**2)[:, None]) & self._sph_allowed_obs
-        diff = centres[..., self._ss_i, :] - centres[..., self._ss_j, :]
-        near_self = np.einsum("...k,...k->...", diff, diff) <= self._ss_thr2
-        return near, near_self
+    def _state_d2(self, rows: np.ndarray) -> np.ndarray:
+        """Squared distances (P,): scene spheres to obstacle boxes (a spheres x obstacles grid),
+        then self sphere pairs centre to centre."""
+        D = self._De  # the homogeneous w column stays 0 throughout
+        np.take(rows, self._env_rep, axis=0, out=D, mode="clip")
+        np.subtract(D, self._obs_c4, out=D)
+        np.abs(D, out=D)
+        np.subtract(D, self._obs_h4, out=D)
+        np.maximum(D, self._Ze, out=D)
+        np.multiply(D, D, out=D)
+        np.dot(D, self._ones4, out=self._d2e)
+        Ds = self._Ds
+        np.take(rows, self._iab_self, axis=0, out=self._Gs, mode="clip")
+        np.subtract(self._Gs0, self._Gs1, out=Ds)
+        np.multiply(Ds, Ds, out=Ds)
+        np.dot(Ds, self._ones4, out=self._d2s)
+        return self._d2
 
-    def _exact(self, X_WB, near: np.ndarray, near_self: np.ndarray) -> bool:
-        """True if any candidate pair of one state really collides."""
-        placed = {}
-        sph, obs = np.nonzero(near)
-        for pi, oi in {(int(self._sph_part[s]), int(o)) for s, o in zip(sph, obs)}:
-            obj = placed.get(pi) or placed.setdefault(pi, self._place(self.parts[pi], X_WB))
-            if fcl.collide(obj, self.obstacles[oi][1], self._req, fcl.CollisionResult()):
-                return True
-        for k in set(self._ss_pair[np.nonzero(near_self)[0]].tolist()):
-            i, j = self.self_pairs[k]
-            oi = placed.get(i) or placed.setdefault(i, self._place(self.parts[i], X_WB))
-            oj = placed.get(j) or placed.setdefault(j, self._place(self.parts[j], X_WB))
-            if fcl.collide(oi, oj, self._req, fcl.CollisionResult()):
+    def _batch_d2(self, rows: np.ndarray) -> np.ndarray:
+        D = np.take(rows, self._env_rep, axis=1)
+        D -= self._obs_c4
+        np.abs(D, out=D)
+        D -= self._obs_h4
+        np.maximum(D, 0.0, out=D)
+        D *= D
+        Ds = np.take(rows, self._iab_self[0], axis=1) - np.take(rows, self._iab_self[1], axis=1)
+        Ds *= Ds
+        return np.concatenate([D @ self._ones4, Ds @ self._ones4], axis=1)
+
+    def _unsafe_tables(self, q) -> list[int]:
+        """Pair ids of the tabled self pairs that q's cells do not prove apart."""
+        ql = q.tolist() if isinstance(q, np.ndarray) else [float(v) for v in q]
+        out = []
+        for j, lo, inv, n, cells, k in self._tables:
+            x = (ql[j] - lo) * inv
+            if not 0.0 <= x < n or not cells[int(x)]:
+                out.append(k)
+        return out
+
+    def _collides(self, rows: np.ndarray, d2: np.ndarray, hits: np.ndarray, unsafe: list[int]) -> bool:
+        """Decide one state from its overlapping sphere pairs `hits` and unproved tabled pairs:
+        a certain collision by inner balls, else exact FCL per part-level pair."""
+        if len(hits) and np.count_nonzero(d2.take(hits) < self._rho2.take(hits)):
+            return True
+        placed: dict[int, fcl.CollisionObject] = {}
+        for k in set(self._pp.take(hits).tolist()).union(unsafe):
+            i = self._pp_part[k]
+            oi = placed.get(i) or placed.setdefault(i, self._place(i, rows))
+            j, other = self._pp_other[k]
+            if other is None:
+                other = placed.get(j) or placed.setdefault(j, self._place(j, rows))
+            if fcl.collide(oi, other, self._req, fcl.CollisionResult()):
                 return True
         return False
 
     def is_free(self, q: np.ndarray) -> bool:
         """True if configuration q (7,) rad is free of scene and self collisions."""
         self.checks += 1
-        X_WB = self.robot.link_poses(q)
-        near, near_self = self._candidates(self._sphere_centres(X_WB))
-        if not near.any() and not near_self.any():
+        rows = self._state_rows(q)
+        unsafe = self._unsafe_tables(q)
+        d2 = self._state_d2(rows)
+        hits = np.less_equal(d2, self._R2, out=self._mask).nonzero()[0]
+        if not len(hits) and not unsafe:
             return True
-        return not self._exact(X_WB, near, near_self)
+        return not self._collides(rows, d2, hits, unsafe)
+
+    def _scan(self, Q: np.ndarray, *, stop_at_first: bool) -> np.ndarray:
+        """Free flags (M,) of a batch; with stop_at_first, states after the first collision are
+        left unchecked (reported free)."""
+        out = np.ones(len(Q), bool)
+        for start in range(0, len(Q), CHUNK):
+            Qc = Q[start : start + CHUNK]
+            rows = self._batch_rows(Qc)
+            d2 = self._batch_d2(rows)
+            near = d2 <= self._R2
+            flagged = near.any(axis=1)
+            unsafe = [[] for _ in range(len(Qc))]
+            for j, lo, inv, n, cells, k in self._tables:
+                x = (Qc[:, j] - lo) * inv
+                ok = (x >= 0.0) & (x < n)
+                ok[ok] = np.frombuffer(cells, np.uint8)[x[ok].astype(int)].astype(bool)
+                for m in np.flatnonzero(~ok):
+                    unsafe[m].append(k)
+                flagged |= ~ok
+            for m in np.flatnonzero(flagged):
+                if self._collides(rows[m], d2[m], near[m].nonzero()[0], unsafe[m]):
+                    out[start + m] = False
+                    if stop_at_first:
+                        return out
+        return out
 
     def first_collision(self, Q: np.ndarray) -> int:
         """Index of the first colliding configuration of a batch (M, 7), or -1 if all are free."""
         Q = np.atleast_2d(np.asarray(Q, float))
         self.checks += len(Q)
-        X_WB = self.robot.link_poses(Q)
-        near, near_self = self._candidates(self._sphere_centres(X_WB))
-        flagged = near.any(axis=(1, 2)) | near_self.any(axis=1)
-        for m in np.nonzero(flagged)[0]:
-            if self._exact(X_WB[m], near[m], near_self[m]):
-                return int(m)
-        return -1
+        bad = np.flatnonzero(~self._scan(Q, stop_at_first=True))
+        return int(bad[0]) if len(bad) else -1
 
     def states_free(self, Q: np.ndarray) -> np.ndarray:
         """Boolean (M,) array: which configurations of a batch are free."""
         Q = np.atleast_2d(np.asarray(Q, float))
         self.checks += len(Q)
-        X_WB = self.robot.link_poses(Q)
-        near, near_self = self._candidates(self._sphere_centres(X_WB))
-        out = np.ones(len(Q), bool)
-        for m in np.nonzero(near.any(axis=(1, 2)) | near_self.any(axis=1))[0]:
-            out[m] = not self._exact(X_WB[m], near[m], near_self[m])
-        return out
+        return self._scan(Q, stop_at_first=False)
 
     # --- motions --------------------------------------------------------------------------------
 
@@ -300,22 +644,20 @@ class CollisionWorld:
         python-fcl reports -1 for any colliding pair). Exact FCL distances are computed only for
         pairs whose bounding-sphere lower bound could beat the best found so far.
         """
-        X_WB = self.robot.link_poses(q)
-        c = self._sphere_centres(X_WB)
-        d = np.maximum(np.maximum(self._lo - c[:, None, :], c[:, None, :] - self._hi), 0.0)
-        lb_s = np.sqrt(np.einsum("sok,sok->so", d, d)) - self._sph_r[:, None]
-        lb_s = np.where(self._sph_allowed_obs, lb_s, np.inf)
-        n_parts = len(self.parts)
-        lb = np.full((n_parts, len(self.obstacles)), np.inf)
-        np.minimum.at(lb, self._sph_part, lb_s)
-        order = np.argsort(lb, axis=None)
+        rows = self._state_rows(np.asarray(q, float))
+        d2 = self._state_d2(rows)[: self._n_env]
+        R2 = self._R2[: self._n_env]
+        lb_s = np.where(R2 >= 0, np.sqrt(d2) - np.sqrt(np.abs(R2)), np.inf)
+        lb = np.full(self._n_env_pp, np.inf)
+        pp = self._pp[: self._n_env]
+        np.minimum.at(lb, pp[pp >= 0], lb_s[pp >= 0])
         best = np.inf
-        for flat in order:
-            pi, oi = divmod(int(flat), len(self.obstacles))
-            if lb[pi, oi] >= best or not np.isfinite(lb[pi, oi]):
+        for k in np.argsort(lb):
+            # A bound <= 0 may hide any penetration depth: such pairs are always measured.
+            if lb[k] >= best and lb[k] > 0:
                 break
-            obj = self._place(self.parts[pi], X_WB)
-            dist = fcl.distance(obj, self.obstacles[oi][1], self._dreq, fcl.DistanceResult())
+            obj = self._place(self._pp_part[k], rows)
+            dist = fcl.distance(obj, self._pp_other[k][1], self._dreq, fcl.DistanceResult())
             best = min(best, float(dist))
         return best
 
