@@ -15,6 +15,7 @@ import dataclasses
 import logging
 import math
 
+import cv2
 import numpy as np
 
 from perception.crop import crop_rgb, roi_mask, work_volume_corners_W
@@ -46,6 +47,8 @@ class PerceptionParams:
             top line (its near-vertical strip drops r (1 - cos 20 deg) = 2 mm at its sides).
         max_overhang_m: a can whose estimated footprint reaches further than this beyond the
             plate's edge is not on the plate (the generator keeps cans 10 mm inside the edge).
+        shape_tolerance_m: how far vertical points may reach beyond one can's top (a disc of
+            radius r, or a strip of the can's length and diameter) and still be that can's.
     """
 
     erode_px: int = 3
@@ -56,6 +59,7 @@ class PerceptionParams:
     min_vertical_points: int = 30
     top_percentile: float = 50.0
     max_overhang_m: float = 0.005
+    shape_tolerance_m: float = 0.005
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,7 +106,8 @@ class FrameAnalysis:
         rgb_cropped: the colour image with everything outside `roi` set to empty space.
         mask: (H, W) bool, can-coloured pixels inside `roi`.
         components: the separated, eroded masks.
-        p_W: (N, 3) world points of the pixels that got normals; `labels` (N,) their component.
+        p_W: (N, 3) world points of the pixels that got normals; `labels` (N,) their component,
+            `rc` (N, 2) their pixel (row, column).
         n_W: (N, 3) their world-frame normals (facing the camera).
         vertical: (N,) bool, the points Algorithm 2 keeps.
     """
@@ -116,6 +121,7 @@ class FrameAnalysis:
     n_W: np.ndarray
     labels: np.ndarray
     vertical: np.ndarray
+    rc: np.ndarray
 
 
 def min_area_px(spec: SceneSpec, image: CameraImage, fraction: float) -> int:
@@ -199,7 +205,9 @@ def analyse_frame(image: CameraImage, spec: SceneSpec, params: PerceptionParams 
         & (np.abs(p_W[:, 0] - cx) <= sx / 2)
         & (np.abs(p_W[:, 1] - cy) <= sy / 2)
     )
-    return FrameAnalysis(image, roi, rgb, mask, comps, p_W, n_W, comps.eroded[rows, cols], vertical)
+    return FrameAnalysis(
+        image, roi, rgb, mask, comps, p_W, n_W, comps.eroded[rows, cols], vertical, np.column_stack([rows, cols])
+    )
 
 
 def detect_cans(
@@ -222,43 +230,130 @@ def detect_cans(
     lying_split_m = (2 * r + h) / 2
     out: list[CanDetection] = []
     for k in range(1, fa.components.count + 1):
-        sel = fa.vertical & (fa.labels == k)
-        n = int(sel.sum())
-        if n < params.min_vertical_points:
-            log.debug("component %d: %d vertical points, not a can", k, n)
-            continue
-        pts = fa.p_W[sel]
-        xy = pts[:, :2].mean(axis=0)
-        top_z = float(np.percentile(pts[:, 2], params.top_percentile))
-        lying = bool(top_z - top_plate < lying_split_m)
-        yaw = axis_yaw_tls(pts[:, :2]) if lying else 0.0
-        z = top_plate + (r if lying else h / 2)
-        overhang = footprint_overhang_m(spec, xy=xy, lying=lying, axis_yaw_rad=yaw)
-        if overhang > params.max_overhang_m:
-            # Cans stand wholly on the plate; a footprint beyond its edge is a can partly off the
-            # plate (its points beyond the edge were dropped, so its estimate would be biased).
-            log.info("component %d: footprint %.1f mm beyond the plate edge, not a can on the plate", k, overhang * 1e3)
-            continue
-        det_id = len(out)
-        grasp = make_grasp(
-            can_id=det_id,
-            p_xy_m=xy,
-            top_z_m=top_z,
-            lying=lying,
-            axis_yaw_rad=yaw,
-            top_offset_m=spec.grasp.top_offset_m,
-            pregrasp_height_m=spec.grasp.pregrasp_height_m,
-        )
-        out.append(
-            CanDetection(
-                id=det_id,
-                p_WC_m=(float(xy[0]), float(xy[1]), float(z)),
-                lying=lying,
-                axis_yaw_rad=float(yaw),
+        in_comp = np.nonzero(fa.vertical & (fa.labels == k))[0]
+        for idx in _single_cans(fa, in_comp, spec=spec, params=params, lying_split_m=lying_split_m):
+            n = idx.size
+            if n < params.min_vertical_points:
+                log.debug("component %d: %d vertical points, not a can", k, n)
+                continue
+            pts = fa.p_W[idx]
+            xy = pts[:, :2].mean(axis=0)
+            top_z = float(np.percentile(pts[:, 2], params.top_percentile))
+            lying = bool(top_z - top_plate < lying_split_m)
+            yaw = axis_yaw_tls(pts[:, :2]) if lying else 0.0
+            z = top_plate + (r if lying else h / 2)
+            overhang = footprint_overhang_m(spec, xy=xy, lying=lying, axis_yaw_rad=yaw)
+            if overhang > params.max_overhang_m:
+                # Cans stand wholly on the plate; a footprint beyond its edge is a can partly off
+                # the plate (its points beyond the edge were dropped: its estimate would be biased).
+                log.info("component %d: footprint %.1f mm beyond the plate edge, not a can on the plate",
+                         k, overhang * 1e3)
+                continue
+            if not _one_can(pts[:, :2], xy=xy, lying=lying, axis_yaw_rad=yaw, spec=spec, params=params):
+                # Never a grasp between two cans: a blob that is no single can's top is dropped.
+                log.warning("component %d: vertical points do not fit one can's top; no grasp for it", k)
+                continue
+            det_id = len(out)
+            grasp = make_grasp(
+                can_id=det_id,
+                p_xy_m=xy,
                 top_z_m=top_z,
-                grasp=grasp,
-                n_points=n,
-                area_px=fa.components.areas_px[k - 1],
+                lying=lying,
+                axis_yaw_rad=yaw,
+                top_offset_m=spec.grasp.top_offset_m,
+                pregrasp_height_m=spec.grasp.pregrasp_height_m,
             )
-        )
+            out.append(
+                CanDetection(
+                    id=det_id,
+                    p_WC_m=(float(xy[0]), float(xy[1]), float(z)),
+                    lying=lying,
+                    axis_yaw_rad=float(yaw),
+                    top_z_m=top_z,
+                    grasp=grasp,
+                    n_points=int(n),
+                    area_px=fa.components.areas_px[k - 1],
+                )
+            )
     return out, fa
+
+
+_CLOSE_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))
+
+
+def _single_cans(
+    fa: FrameAnalysis, idx: np.ndarray, *, spec: SceneSpec, params: PerceptionParams, lying_split_m: float
+) -> list[np.ndarray]:
+    """Split one component's vertical points into groups that each belong to one can.
+
+    With the paper's gap between cans every component is one can and this returns it whole.
+    Touching cans merge into one component; their tops still come apart: an upright can's top
+    disc and a lying can's top strip lie at different heights; two lying cans' strips are
+    separated by the crease where their sides meet (no vertical normals there); two upright
+    cans' discs touch at most at a point, so their combined area says how many they are and
+    k-means splits them (the discs are convex and disjoint).
+    """
+    if idx.size == 0:
+        return []
+    groups = []
+    high = fa.p_W[idx, 2] - spec.plate_top_z_m >= lying_split_m
+    shape = fa.image.depth_m.shape
+    for part, upright in ((idx[high], True), (idx[~high], False)):
+        if part.size == 0:
+            continue
+        img = np.zeros(shape, np.uint8)
+        img[fa.rc[part, 0], fa.rc[part, 1]] = 1
+        # Closing fills the holes a noisy depth leaves among the vertical normals (it cannot
+        # bridge the crease between two lying cans, which is several can radii of pixels wide).
+        img = cv2.morphologyEx(img, cv2.MORPH_CLOSE, _CLOSE_KERNEL)
+        n, lab = cv2.connectedComponents(img, connectivity=8)
+        labels = lab[fa.rc[part, 0], fa.rc[part, 1]]
+        for j in range(1, n):
+            g = part[labels == j]
+            if g.size < params.min_vertical_points:
+                continue
+            if upright:
+                # Each pixel covers (depth / f)^2 of the top face; one eroded disc covers
+                # pi (r - erosion)^2.
+                f = fa.image.K[0, 0]
+                depth_m = float(np.median((fa.p_W[g] - fa.image.X_WC[:3, 3]) @ fa.image.X_WC[:3, 2]))
+                area = float(np.count_nonzero(lab == j)) * (depth_m / f) ** 2
+                erosion_m = params.erode_px * depth_m / f
+                disc = math.pi * max(spec.can.radius_m - erosion_m, 0.5 * spec.can.radius_m) ** 2
+                count = max(1, int(round(area / disc)))
+                if count > 1:
+                    lab_k = _kmeans(fa.p_W[g, :2], count)
+                    groups.extend(g[lab_k == c] for c in range(count))
+                    continue
+            groups.append(g)
+    return groups
+
+
+def _kmeans(xy: np.ndarray, k: int, iterations: int = 20) -> np.ndarray:
+    """Labels (N,) of k-means on points (N, 2), started deterministically from farthest points."""
+    centres = [xy[np.argmax(np.linalg.norm(xy - xy.mean(axis=0), axis=1))]]
+    while len(centres) < k:
+        d = np.min(np.linalg.norm(xy[:, None, :] - np.array(centres)[None], axis=-1), axis=1)
+        centres.append(xy[np.argmax(d)])
+    c = np.array(centres)
+    for _ in range(iterations):
+        lab = np.argmin(np.linalg.norm(xy[:, None, :] - c[None], axis=-1), axis=1)
+        new = np.array([xy[lab == j].mean(axis=0) if np.any(lab == j) else c[j] for j in range(k)])
+        if np.allclose(new, c):
+            break
+        c = new
+    return lab
+
+
+def _one_can(xy_pts: np.ndarray, *, xy, lying: bool, axis_yaw_rad: float, spec: SceneSpec,
+             params: PerceptionParams) -> bool:
+    """Whether vertical points (N, 2) fit on one can's top: a disc of radius r (upright), or a
+    strip no longer than the can and no wider than its diameter (lying)."""
+    tol = params.shape_tolerance_m
+    d = xy_pts - np.asarray(xy)
+    if not lying:
+        return float(np.max(np.linalg.norm(d, axis=1))) <= spec.can.radius_m + tol
+    a = np.array([math.cos(axis_yaw_rad), math.sin(axis_yaw_rad)])
+    along = d @ a
+    across = d @ np.array([-a[1], a[0]])
+    return (float(np.ptp(along)) <= spec.can.height_m + tol) and (float(np.ptp(across)) <= 2 * spec.can.radius_m + tol)

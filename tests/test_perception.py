@@ -175,3 +175,20 @@ def test_cli_json(capsys):
     assert d["X_WGpre"]["p_m"][2] > d["X_WG"]["p_m"][2]
     assert out["evaluation"]["recall"] == 1.0
     assert out["timing_s"]["process"] > 0
+
+
+@pytest.mark.parametrize("noise_m", [0.0, 0.002])
+def test_touching_cans_are_split_never_grasped_between(noise_m):
+    cx, cy, _ = SPEC.plate.center_m
+    scene = _scene([
+        _can(0, cx - 0.08, cy - 0.09, lying=False), _can(1, cx - 0.08 + 2 * R, cy - 0.09, lying=False),
+        _can(2, cx + 0.08, cy - 0.08, lying=True, yaw=0.0), _can(3, cx + 0.08, cy - 0.08 + 2 * R, lying=True, yaw=0.0),
+        _can(4, cx - 0.05, cy + 0.06, lying=True, yaw=math.pi / 2), _can(5, cx - 0.05 + 2 * R, cy + 0.06, lying=False),
+    ])
+    res = perceive(scene, depth_noise_m=noise_m, rng=np.random.default_rng(5))
+    assert res.frames["top"].components.count < 6  # the masks did merge
+    m = _match(res, scene)
+    assert len(m.pairs) == len(res.detections) == 6
+    assert all(m.kind_correct)
+    assert max(m.xy_error_m) < 0.006
+    assert max(m.yaw_error_rad) < math.radians(3.0)
