@@ -189,8 +189,12 @@ class DaskExecutor:
             return Outcome(job, None, "crash", f"Dask worker died running it: {exc}", elapsed)
         except cancelled_error:
             return Outcome(job, None, "crash", "task cancelled on the cluster", elapsed)
-        except Exception as exc:  # an error outside the sandbox (unpicklable job, missing module)
-            return Outcome(job, None, "crash", f"{type(exc).__name__}: {exc}", elapsed)
+        except Exception as exc:
+            # Outside the sandbox: the cluster cannot run tasks at all (the package or a dependency
+            # missing on the scheduler or a worker). Not the trial's fault: stop, record nothing.
+            first_line = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+            raise SuiteError(f"the Dask cluster could not run trial {job.key}: {type(exc).__name__}: {first_line} "
+                             "(the scheduler and every worker need this package installed)") from exc
         if failure is None:
             return Outcome(job, value, None, "", wall_time_s)
         return Outcome(job, None, failure, value, wall_time_s)

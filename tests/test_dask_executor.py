@@ -121,3 +121,14 @@ def test_killed_worker_is_retried_or_recorded_as_crash(cluster, tmp_path):
     got = _outcomes(ex, jobs)
     assert set(got) == {"always"}
     assert got["always"].failure == "crash" and "Dask worker died" in got["always"].message
+
+
+def test_a_task_the_cluster_cannot_run_stops_the_run(cluster):
+    from suite.errors import SuiteError
+
+    # a lambda crosses to the worker (cloudpickle) but not into the sandbox (pickle): an error outside
+    # the sandbox is the cluster's, not the trial's, so no record is made for it
+    ex = DaskExecutor(scheduler=cluster.scheduler_address)
+    with pytest.raises(SuiteError, match="could not run trial lam"):
+        _outcomes(ex, [Job("lam", lambda p: {"x": p}, 1, 10.0)])
+    assert _outcomes(ex, [Job("ok", _sleep, 0.1, 10.0)])["ok"].result == {"slept_s": 0.1}
