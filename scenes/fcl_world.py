@@ -338,6 +338,7 @@ class CollisionWorld:
         self._build_fk()
         self._req = fcl.CollisionRequest()
         self._dreq = fcl.DistanceRequest(enable_signed_distance=True)
+        self._check = self._make_state_check()
         self.checks = 0  # state checks answered, for planner statistics
 
     # --- construction -----------------------------------------------------------------------------
@@ -366,9 +367,9 @@ class CollisionWorld:
         self._link_end = link_end
 
     def _build_pairs(self, env_pairs, self_pairs, obs_c, obs_h, obs_exact) -> None:
-        """Sphere-level pairs as arrays (scene pairs as a spheres x obstacles grid, then self
-        pairs); each part-level pair gets an id, and the self pairs with a table leave the
-        sphere test for their table."""
+        """Sphere-level pairs as index arrays into the world rows (robot rows, then the
+        obstacles' box centres): scene pairs as a spheres x obstacles grid, then self pairs.
+        Each part-level pair gets an id; self pairs with a table leave the sphere test to it."""
         self._pp_part: list[int] = []
         self._pp_other: list[tuple[int, fcl.CollisionObject | None]] = []
 
@@ -378,30 +379,27 @@ class CollisionWorld:
             return len(self._pp_part) - 1
 
         n_obs = len(self.obstacles)
+        self._obs_row0 = len(self._rows0)
         env_parts = sorted({i for i, _ in env_pairs})
-        rows_e, outer_e, inner_e, part_e = [], [], [], []
-        for i in env_parts:
-            r, outer, inner = self._spheres["env"][i]
-            rows_e.append(r)
-            outer_e.append(outer)
-            inner_e.append(inner)
-            part_e += [i] * len(r)
-        self._env_rows = np.concatenate(rows_e).astype(np.intp)
-        outer_e, inner_e, part_e = np.concatenate(outer_e), np.concatenate(inner_e), np.array(part_e)
-        S = len(self._env_rows)
+        env_rows = np.concatenate([self._spheres["env"][i][0] for i in env_parts])
+        outer_e = np.concatenate([self._spheres["env"][i][1] for i in env_parts])
+        inner_e = np.concatenate([self._spheres["env"][i][2] for i in env_parts])
+        part_e = np.concatenate([[i] * len(self._spheres["env"][i][0]) for i in env_parts]).astype(int)
+        S = len(env_rows)
         pp_grid = np.full((len(self.parts), n_obs), -1)
         for i, k in env_pairs:
             pp_grid[i, k] = new_pair(i, (-1, self.obstacles[k][1]))
+        self._n_env_pp = len(self._pp_part)
         pp_env = pp_grid[part_e]  # (S, O); -1 where the pair does not count
         allowed = pp_env >= 0
         R2_env = np.where(allowed, outer_e[:, None] ** 2, -1.0)
         exact = np.asarray(obs_exact)[None, :]  # a can's box only bounds the can: no inner test
         rho2_env = np.where(allowed & exact, inner_e[:, None] ** 2, -1.0)
-        self._n_env_pp = len(self._pp_part)
-        self._obs_c = np.array(obs_c)
-        self._obs_h = np.array(obs_h)
-
-        ia, ib, r2, rho2, pp = [], [], [], [], []
+        ia = [np.repeat(env_rows, n_obs)]
+        ib = [np.tile(self._obs_row0 + np.arange(n_obs), S)]
+        h = [np.tile(np.asarray(obs_h, float), (S, 1))]
+        r2, rho2, pp = [R2_env.ravel()], [rho2_env.ravel()], [pp_env.ravel()]
+        self._n_env = S * n_obs
         tables = []
         for i, j in self_pairs:
             a, b = self.parts[i], self.parts[j]
@@ -418,84 +416,93 @@ class CollisionWorld:
             si, sj = np.meshgrid(ri, rj, indexing="ij")
             ia.append(si.ravel())
             ib.append(sj.ravel())
+            h.append(np.zeros((si.size, 3)))
             r2.append(np.add.outer(oi, oj).ravel() ** 2)
             rho2.append(np.add.outer(ni, nj).ravel() ** 2)
             pp.append(np.full(si.size, k))
         self._tables = tables
-        self._iab_self = np.stack([np.concatenate(ia), np.concatenate(ib)]).astype(np.intp)
-        self._R2 = np.concatenate([R2_env.ravel()] + r2)
-        self._rho2 = np.concatenate([rho2_env.ravel()] + rho2)
-        self._pp = np.concatenate([pp_env.ravel()] + pp).astype(np.intp)
-        self._n_env = S * n_obs
-        Ps = self._iab_self.shape[1]
-        # work buffers of the single-state path (views created once)
-        # Same-shape arrays throughout: numpy broadcasting over a last axis of 3 is slow.
-        self._env_rep = np.repeat(self._env_rows, n_obs)
-        self._obs_c4 = np.tile(np.column_stack([self._obs_c, np.ones(n_obs)]), (S, 1))
-        self._obs_h4 = np.tile(np.column_stack([self._obs_h, np.zeros(n_obs)]), (S, 1))
-        self._De = np.empty((S * n_obs, 4))
-        self._Ze = np.zeros((S * n_obs, 4))
-        self._Gs = np.empty((2, Ps, 4))
-        self._Gs0, self._Gs1 = self._Gs[0], self._Gs[1]
-        self._Ds = np.empty((Ps, 4))
-        self._d2 = np.empty(self._n_env + Ps)
-        self._d2e, self._d2s = self._d2[: self._n_env], self._d2[self._n_env :]
-        self._mask = np.empty(len(self._d2), bool)
-        self._ones4 = np.ones(4)
+        self._iab = np.stack([np.concatenate(ia), np.concatenate(ib)]).astype(np.intp)
+        self._H = np.concatenate(h)
+        self._R2 = np.concatenate(r2)
+        self._rho2 = np.concatenate(rho2)
+        self._pp = np.concatenate(pp).astype(np.intp)
+        P = len(self._R2)
+        self._obs_c = np.asarray(obs_c, float)
+        # work buffers of the single-state path
+        self._G = np.empty((2, P, 3))
+        self._D = np.empty((P, 3))
+        self._Z = np.zeros((P, 3))
+        self._d2 = np.empty(P)
+        self._mask = np.empty(P, bool)
+        self._ones3 = np.ones(3)
 
     def _build_fk(self) -> None:
-        """X_origin Rz(q) = O Ec cos q + O Es sin q + O E1; stored transposed, one row per entry."""
+        """Local joint transforms from [cos q, sin q, 1] by one product, and the FK buffers.
+
+        X_origin Rz(q) = O Ec cos q + O Es sin q + O E1, stored transposed (rows multiply from
+        the left): joints 2..7 as 4 x 4, joint 1 as 4 x 3 (its product is the world rows, x y z).
+        Step k (joint k) maps rows of links >= k from link k to link k-1: it reads buffer k, whose
+        rows beyond link k+1's are link k's own constant rows, and writes the leading rows of
+        buffer k-1, so no buffer ever needs restoring.
+        """
         Ec = np.diag([1.0, 1.0, 0.0, 0.0])
         Es = np.zeros((4, 4))
         Es[0, 1], Es[1, 0] = -1.0, 1.0
         E1 = np.diag([0.0, 0.0, 1.0, 1.0])
-        M = np.zeros((7 * 16, 15))
+        M_full = np.zeros((7 * 16, 15))
         for k, joint in enumerate(self.robot.joints):
             O = joint.X_origin
-            M[16 * k : 16 * k + 16, k] = (O @ Ec).T.ravel()
-            M[16 * k : 16 * k + 16, 7 + k] = (O @ Es).T.ravel()
-            M[16 * k : 16 * k + 16, 14] = (O @ E1).T.ravel()
-        self._M = M
+            for col, E in ((k, Ec), (7 + k, Es), (14, E1)):
+                M_full[16 * k : 16 * k + 16, col] = (O @ E).T.ravel()
+        self._M_full = M_full
+        first = M_full[:16].reshape(4, 4, 15)[:, :3].reshape(12, 15)  # joint 1, x y z columns only
+        self._M = np.vstack([M_full[16:], first])
         self._cs = np.zeros(15)
         self._cs[14] = 1.0
         self._cos, self._sin = self._cs[:7], self._cs[7:14]
-        self._LT = np.empty((7, 4, 4))
-        self._LT_flat = self._LT.reshape(112)
-        self._buf0 = np.stack([self._rows0, self._rows0])
-        self._buf = self._buf0.copy()
-        # joint k turns the rows of links >= k: read buffer k % 2, write buffer (k - 1) % 2
-        self._steps = [
-            (self._buf[k % 2, : self._link_end[k]], self._LT[k - 1], self._buf[(k - 1) % 2, : self._link_end[k]])
-            for k in range(7, 0, -1)
-        ]
-        self._rows = self._buf[0]
+        LT = np.empty(6 * 16 + 12)
+        self._LT_flat = LT
+        LTk = {k: LT[16 * (k - 2) : 16 * (k - 1)].reshape(4, 4) for k in range(2, 8)}
+        LTk[1] = LT[96:].reshape(4, 3)
+        e = self._link_end
+        n_robot = len(self._rows0)
+        bufs = {k: self._rows0[: e[k]].copy() for k in range(1, 8)}
+        world = np.empty((n_robot + len(self._obs_c), 3))
+        world[e[1] : n_robot] = self._rows0[e[1] :, :3]  # link 0 is the world frame
+        world[n_robot:] = self._obs_c
+        self._world0 = world.copy()
+        self._steps = [(bufs[k], LTk[k], bufs[k - 1][: e[k]]) for k in range(7, 1, -1)]
+        self._steps.append((bufs[1], LTk[1], world[: e[1]]))
+        self._rows = world
 
     # --- kinematics -----------------------------------------------------------------------------
 
     def _state_rows(self, q) -> np.ndarray:
-        """All rows in the world frame for one configuration (a view of a work buffer)."""
+        """World rows (x, y, z) of one configuration: robot rows then obstacle centres (a work buffer)."""
         np.cos(q, out=self._cos)
         np.sin(q, out=self._sin)
         np.dot(self._M, self._cs, out=self._LT_flat)
-        np.copyto(self._buf, self._buf0)
         for src, LT, dst in self._steps:
             np.dot(src, LT, out=dst)
         return self._rows
 
     def _batch_rows(self, Q: np.ndarray) -> np.ndarray:
-        """All rows in the world frame for a batch (M, 7): (M, rows, 4)."""
+        """World rows of a batch (M, 7): (M, rows, 3)."""
         m = len(Q)
         cs = np.empty((m, 15))
         cs[:, :7] = np.cos(Q)
         cs[:, 7:14] = np.sin(Q)
         cs[:, 14] = 1.0
-        LT = (cs @ self._M.T).reshape(m, 7, 4, 4)
+        LT = (cs @ self._M_full.T).reshape(m, 7, 4, 4)
         buf = np.empty((m,) + self._rows0.shape)
         buf[:] = self._rows0
         for k in range(7, 0, -1):
             e = self._link_end[k]
             buf[:, :e] = np.matmul(buf[:, :e], LT[:, k - 1])
-        return buf
+        out = np.empty((m,) + self._world0.shape)
+        out[:, : len(self._rows0)] = buf[..., :3]
+        out[:, len(self._rows0) :] = self._obs_c
+        return out
 
     def _place(self, p: int, rows: np.ndarray) -> fcl.CollisionObject:
         f = self._frame_row[p]
@@ -507,49 +514,34 @@ class CollisionWorld:
     # --- state checks ---------------------------------------------------------------------------
 
     def _state_d2(self, rows: np.ndarray) -> np.ndarray:
-        """Squared distances (P,): scene spheres to obstacle boxes (a spheres x obstacles grid),
-        then self sphere pairs centre to centre."""
-        D = self._De  # the homogeneous w column stays 0 throughout
-        np.take(rows, self._env_rep, axis=0, out=D, mode="clip")
-        np.subtract(D, self._obs_c4, out=D)
+        """Squared distance (P,) of each sphere pair's centre to its partner: an obstacle's box
+        (half sizes H) or another sphere's centre (H = 0)."""
+        D = self._D
+        np.take(rows, self._iab, axis=0, out=self._G, mode="clip")
+        np.subtract(self._G[0], self._G[1], out=D)
         np.abs(D, out=D)
-        np.subtract(D, self._obs_h4, out=D)
-        np.maximum(D, self._Ze, out=D)
+        np.subtract(D, self._H, out=D)
+        np.maximum(D, self._Z, out=D)
         np.multiply(D, D, out=D)
-        np.dot(D, self._ones4, out=self._d2e)
-        Ds = self._Ds
-        np.take(rows, self._iab_self, axis=0, out=self._Gs, mode="clip")
-        np.subtract(self._Gs0, self._Gs1, out=Ds)
-        np.multiply(Ds, Ds, out=Ds)
-        np.dot(Ds, self._ones4, out=self._d2s)
-        return self._d2
+        return np.dot(D, self._ones3, out=self._d2)
 
     def _batch_d2(self, rows: np.ndarray) -> np.ndarray:
-        D = np.take(rows, self._env_rep, axis=1)
-        D -= self._obs_c4
+        D = np.take(rows, self._iab[0], axis=1) - np.take(rows, self._iab[1], axis=1)
         np.abs(D, out=D)
-        D -= self._obs_h4
+        D -= self._H
         np.maximum(D, 0.0, out=D)
         D *= D
-        Ds = np.take(rows, self._iab_self[0], axis=1) - np.take(rows, self._iab_self[1], axis=1)
-        Ds *= Ds
-        return np.concatenate([D @ self._ones4, Ds @ self._ones4], axis=1)
-
-    def _unsafe_tables(self, q) -> list[int]:
-        """Pair ids of the tabled self pairs that q's cells do not prove apart."""
-        ql = q.tolist() if isinstance(q, np.ndarray) else [float(v) for v in q]
-        out = []
-        for j, lo, inv, n, cells, k in self._tables:
-            x = (ql[j] - lo) * inv
-            if not 0.0 <= x < n or not cells[int(x)]:
-                out.append(k)
-        return out
+        return D @ self._ones3
 
     def _collides(self, rows: np.ndarray, d2: np.ndarray, hits: np.ndarray, unsafe: list[int]) -> bool:
         """Decide one state from its overlapping sphere pairs `hits` and unproved tabled pairs:
-        a certain collision by inner balls, else exact FCL per part-level pair."""
+        a certain collision by inner balls, else exact FCL."""
         if len(hits) and np.count_nonzero(d2.take(hits) < self._rho2.take(hits)):
             return True
+        return self._exact(rows, hits, unsafe)
+
+    def _exact(self, rows: np.ndarray, hits: np.ndarray, unsafe: list[int]) -> bool:
+        """True if an FCL query finds a collision in a part-level pair of `hits` or `unsafe`."""
         placed: dict[int, fcl.CollisionObject] = {}
         for k in set(self._pp.take(hits).tolist()).union(unsafe):
             i = self._pp_part[k]
@@ -561,16 +553,59 @@ class CollisionWorld:
                 return True
         return False
 
+    def _make_state_check(self):
+        """`check(q) -> bool` (True if free): the single-state path of `is_free`, `_state_rows`
+        and `_state_d2` inlined with every array bound as a local (attribute lookups and calls
+        are a good part of a 20 us budget)."""
+        cos, sin, dot, take = np.cos, np.sin, np.dot, np.take
+        subtract, absolute, maximum, multiply = np.subtract, np.abs, np.maximum, np.multiply
+        less, less_equal, count_nonzero = np.less, np.less_equal, np.count_nonzero
+        cos_q, sin_q, M, cs, LT_flat, rows = self._cos, self._sin, self._M, self._cs, self._LT_flat, self._rows
+        (s7, L7, d7), (s6, L6, d6), (s5, L5, d5), (s4, L4, d4), (s3, L3, d3), (s2, L2, d2_), (s1, L1, d1) = self._steps
+        iab, G, D, H, Z, ones3 = self._iab, self._G, self._D, self._H, self._Z, self._ones3
+        G0, G1 = G[0], G[1]
+        d2, R2, rho2, mask = self._d2, self._R2, self._rho2, self._mask
+        mask_in = np.empty_like(mask)
+        tables, exact = self._tables, self._exact
+        ndarray = np.ndarray
+
+        def check(q) -> bool:
+            cos(q, cos_q)
+            sin(q, sin_q)
+            dot(M, cs, LT_flat)
+            dot(s7, L7, d7)
+            dot(s6, L6, d6)
+            dot(s5, L5, d5)
+            dot(s4, L4, d4)
+            dot(s3, L3, d3)
+            dot(s2, L2, d2_)
+            dot(s1, L1, d1)
+            take(rows, iab, 0, G, "clip")
+            subtract(G0, G1, D)
+            absolute(D, D)
+            subtract(D, H, D)
+            maximum(D, Z, out=D)  # (a positional out is deprecated, and slow, for maximum)
+            multiply(D, D, D)
+            dot(D, ones3, d2)
+            hits = less_equal(d2, R2, mask).nonzero()[0]
+            ql = q.tolist() if type(q) is ndarray else [float(v) for v in q]
+            unsafe = []
+            for j, lo, inv, n, cells, k in tables:
+                x = (ql[j] - lo) * inv
+                if not 0.0 <= x < n or not cells[int(x)]:
+                    unsafe.append(k)
+            if not len(hits) and not unsafe:
+                return True
+            if count_nonzero(less(d2, rho2, mask_in)):
+                return False  # an inner ball meets a box or another part's inner ball
+            return not exact(rows, hits, unsafe)
+
+        return check
+
     def is_free(self, q: np.ndarray) -> bool:
         """True if configuration q (7,) rad is free of scene and self collisions."""
         self.checks += 1
-        rows = self._state_rows(q)
-        unsafe = self._unsafe_tables(q)
-        d2 = self._state_d2(rows)
-        hits = np.less_equal(d2, self._R2, out=self._mask).nonzero()[0]
-        if not len(hits) and not unsafe:
-            return True
-        return not self._collides(rows, d2, hits, unsafe)
+        return self._check(q)
 
     def _scan(self, Q: np.ndarray, *, stop_at_first: bool) -> np.ndarray:
         """Free flags (M,) of a batch; with stop_at_first, states after the first collision are
