@@ -2,10 +2,12 @@
 
 The state space is the arm's 7 joints (RealVectorStateSpace with the joint limits). States and
 motions are checked by the problem's python-fcl world (`suite.worlds.collision_world`): a state by
-`is_free`, a straight motion by one batched `first_collision` query over samples at most
+`is_free`, a straight motion by two batched `first_collision` queries over samples at most
 `resolution_rad` apart in every joint, the end state and coarse samples first so that a blocked
 motion is rejected after few exact checks. The solution is shortened by OMPL's PathSimplifier
-under a time budget and, unless disabled, re-checked at the validator's resolution (0.01 rad).
+(by default its deterministic rope shortcut; optionally its randomized `simplify` under a time
+budget) and, if it was planned at a coarser resolution, re-checked at the validator's (0.01 rad)
+and planned again at that resolution if it fails. Only an exact solution counts.
 
 Randomness: OMPL draws every RNG's seed from one process-global seed generator. A trial restarts
 that generator at a seed derived from `problem.seed` and the problem's identity before it creates
@@ -55,7 +57,9 @@ class OmplConfig:
         range_rad: the planner's extension step (joint-space L2 norm, rad); None for OMPL's
             default (0.2 x the space's maximum extent, about 2.8 rad here).
         resolution_rad: the largest joint step between checked samples of a motion while
-            planning and simplifying (rad).
+            planning and simplifying (rad): 0.05 for `rrt` (its few long segments are re-checked
+            at `validate_resolution_rad`), 0.01 for the optimizing planners (their paths run
+            along obstacles and would often fail the finer check).
         simplifier: how OMPL's PathSimplifier shortens the path: "rope" (`ropeShortcutPath`:
             deterministic, pulls the path tight from the start), "full" (`simplify`: randomized
             shortcuts, B-spline smoothing and vertex reduction, until converged or out of time) or
@@ -110,12 +114,14 @@ class RRTstarConfig(OmplConfig):
 
     Attributes:
         rewire_factor: OMPL's rewiring radius factor.
+        goal_bias: probability of sampling the goal (OMPL's default 0.05).
     """
 
     # Optimized paths run along obstacles: checked at the validator's resolution from the start.
     resolution_rad: float = 0.01
 
     rewire_factor: float = 1.1
+    goal_bias: float = 0.05
 
 
 @dataclasses.dataclass(frozen=True)
@@ -164,9 +170,10 @@ def _set_ompl_log_level(verbose: bool) -> None:
 def _reseed_ompl(seed: int) -> None:
     """Restart OMPL's process-global seed generator at `seed` (1 <= seed < 2**32).
 
-    OMPL logs an error when the seed is set after some RNG exists: RNGs created before keep their
-    streams. Every OMPL object of a trial is created after this call, so that message does not
-    apply here and is held back.
+    `RNG::setSeed` reseeds the generator that seeds every RNG created afterwards, also after the
+    first RNG exists (OMPL's src/ompl/util/src/RandomNumbers.cpp); it then logs an error because
+    RNGs created before keep their streams. Every OMPL object of a trial is created after this
+    call, so that message does not apply here and is held back.
     """
     level = ou.getLogLevel()
     ou.setLogLevel(ou.LOG_NONE)
@@ -305,7 +312,7 @@ class _OmplPlanner:
             bad_at = world.path_free(result.path, resolution_rad=fine)
             if bad_at >= 0:
                 remaining_s = budget_s - (time.perf_counter() - t0)
-                log.info("%s %s: path collides at %.3f rad resolution; replanning at that resolution in %.3f s",
+                log.debug("%s %s: path collides at %.3f rad resolution; replanning at that resolution in %.3f s",
                          self.name, problem.name, fine, remaining_s)
                 if remaining_s > 0:
                     retry = self._attempt(problem, world, resolution_rad=fine, budget_s=remaining_s, seed=seed)
@@ -437,6 +444,7 @@ class RRTstarPlanner(_OmplPlanner):
         if self.config.range_rad is not None:
             p.setRange(self.config.range_rad)
         p.setRewireFactor(self.config.rewire_factor)
+        p.setGoalBias(self.config.goal_bias)
         return p
 
     def _planner_stats(self, planner):
@@ -490,4 +498,4 @@ class PRMPlanner(_OmplPlanner):
         return p
 
     def _planner_stats(self, planner):
-        return {"iterations": planner.milestoneCount(), "roadmap_edges": planner.edgeCount()}
+        return {"milestones": planner.milestoneCount(), "roadmap_edges": planner.edgeCount()}
