@@ -132,3 +132,16 @@ def test_a_task_the_cluster_cannot_run_stops_the_run(cluster):
     with pytest.raises(SuiteError, match="could not run trial lam"):
         _outcomes(ex, [Job("lam", lambda p: {"x": p}, 1, 10.0)])
     assert _outcomes(ex, [Job("ok", _sleep, 0.1, 10.0)])["ok"].result == {"slept_s": 0.1}
+
+
+def test_parent_backstop_cancels_a_task_past_its_deadline(cluster, monkeypatch):
+    import suite.dask_executor as dx
+
+    # make the parent's deadline (2 x hard limit + grace) fall 1 s after the task is seen running,
+    # well before the worker-side kill at the 5 s hard limit
+    monkeypatch.setattr(dx, "BACKSTOP_GRACE_S", -9.0)
+    ex = DaskExecutor(scheduler=cluster.scheduler_address)
+    t0 = time.monotonic()
+    got = _outcomes(ex, [Job("stuck", _sleep, 8.0, 5.0)])
+    assert time.monotonic() - t0 < 4.5
+    assert got["stuck"].failure == "killed_timeout" and "cancelled by the parent" in got["stuck"].message
