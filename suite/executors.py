@@ -129,6 +129,7 @@ class LocalExecutor:
                             yield Outcome(job, result, None, "", elapsed)
                             continue
                     if w.proc.sentinel in ready or not w.proc.is_alive():
+                        w.proc.join(timeout=1)  # the pipe can close before the exit code is set
                         code = w.proc.exitcode
                         w.kill()
                         workers[i] = _Worker(self._ctx, self.init)
