@@ -13,7 +13,8 @@ from suite.errors import SuiteError
 
 log = logging.getLogger(__name__)
 
-MAX_PLACEMENT_TRIES = 2000
+MAX_PLACEMENT_TRIES = 500
+MAX_LAYOUT_RESTARTS = 100
 MAX_REACH_ROUNDS = 20
 
 
@@ -71,7 +72,8 @@ def _sample_can(rng: np.random.Generator, spec: SceneSpec, can_id: int) -> CanPo
     return can
 
 
-def _place(rng, spec, can_id, others) -> CanPose:
+def _place(rng, spec, can_id, others) -> CanPose | None:
+    """A can at least min_gap from the others, or None if random draws found no room."""
     r, h = spec.can.radius_m, spec.can.height_m
     for _ in range(MAX_PLACEMENT_TRIES):
         can = _sample_can(rng, spec, can_id)
@@ -79,10 +81,28 @@ def _place(rng, spec, can_id, others) -> CanPose:
             continue
         if all(_footprint_distance(can, o, r, h) >= spec.cans.min_gap_m for o in others):
             return can
-    raise SuiteError(
+    return None
+
+
+def _cannot_place(spec) -> SuiteError:
+    return SuiteError(
         f"cannot place {spec.cans.count} cans on the plate {spec.plate.size_m[:2]} m at least "
         f"{spec.cans.min_gap_m} m apart (field 'cans.count'); try fewer cans or a smaller gap"
     )
+
+
+def _layout(rng, spec) -> list[CanPose]:
+    """All cans placed one after another; a layout that boxes itself in is drawn again."""
+    for _ in range(MAX_LAYOUT_RESTARTS):
+        cans: list[CanPose] = []
+        for i in range(spec.cans.count):
+            can = _place(rng, spec, i, cans)
+            if can is None:
+                break
+            cans.append(can)
+        else:
+            return cans
+    raise _cannot_place(spec)
 
 
 def unreachable_cans(scene: Scene) -> list[int]:
@@ -120,9 +140,7 @@ def generate_scene(spec: SceneSpec, *, seed: int, check_reachable: bool = True) 
             f"at most {bound} cans fit"
         )
     rng = np.random.default_rng(seed)
-    cans: list[CanPose] = []
-    for i in range(n):
-        cans.append(_place(rng, spec, i, cans))
+    cans = _layout(rng, spec)
     scene = Scene(spec, seed, tuple(cans))
     if not check_reachable:
         return scene
@@ -133,6 +151,10 @@ def generate_scene(spec: SceneSpec, *, seed: int, check_reachable: bool = True) 
         log.debug("seed %d round %d: redrawing unreachable cans %s", seed, round_, bad)
         for i in bad:
             others = [c for c in cans if c.id != i]
-            cans[i] = _place(rng, spec, i, others)
+            can = _place(rng, spec, i, others)
+            if can is None:
+                cans = _layout(rng, spec)
+                break
+            cans[i] = can
         scene = Scene(spec, seed, tuple(cans))
     raise SuiteError(f"seed {seed}: could not draw {n} reachable cans in {MAX_REACH_ROUNDS} rounds")
