@@ -57,7 +57,7 @@ def frame_figure(fa: FrameAnalysis, spec: SceneSpec, path: Path) -> None:
     axes[1].imshow(fa.rgb_cropped)
     axes[1].set_title("cropped to the work volume (outside = empty)")
     axes[2].imshow(fa.mask, cmap="gray")
-    axes[2].set_title(f"can-colour mask ({int(fa.mask.sum())} px)")
+    axes[2].set_title(f"can mask ({int(fa.mask.sum())} px)")
     axes[3].imshow(_label_image(fa.components.eroded))
     for k, (u, v) in _centroids(fa.components.labels).items():
         axes[3].text(u, v, str(k), color="white", ha="center", va="center", fontsize=11, weight="bold")

@@ -21,6 +21,7 @@ import numpy as np
 from perception.crop import crop_rgb, roi_mask, work_volume_corners_W
 from perception.geometry import back_project_camera, camera_to_world, project
 from perception.normals import estimate_normals
+from perception.plane import above_plate_mask
 from perception.segment import Components, can_mask, separate
 from scenes.grasp_rule import Grasp, make_grasp
 from scenes.render import CameraImage
@@ -49,6 +50,10 @@ class PerceptionParams:
             plate's edge is not on the plate (the generator keeps cans 10 mm inside the edge).
         shape_tolerance_m: how far vertical points may reach beyond one can's top (a disc of
             radius r, or a strip of the can's length and diameter) and still be that can's.
+        segmentation: "color" (the paper's HSV rule) or "geometric" (colour-free: RANSAC fits
+            the plate's plane; what stands `min_height_above_plate_m` above it is can).
+        ransac_threshold_m, ransac_iterations, ransac_seed: the plane fit's inlier distance,
+            samples, and the seed of its generator (fixed, so that a frame's result is repeatable).
     """
 
     erode_px: int = 3
@@ -60,6 +65,11 @@ class PerceptionParams:
     top_percentile: float = 50.0
     max_overhang_m: float = 0.005
     shape_tolerance_m: float = 0.005
+    segmentation: str = "color"
+    min_height_above_plate_m: float = 0.01
+    ransac_threshold_m: float = 0.004
+    ransac_iterations: int = 200
+    ransac_seed: int = 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -137,7 +147,19 @@ def segment_frame(image: CameraImage, spec: SceneSpec, params: PerceptionParams)
     """Crop, colour mask and separate one frame. Returns (roi, rgb_cropped, mask, components)."""
     roi = roi_mask(spec, K=image.K, X_WC=image.X_WC, shape=image.depth_m.shape)
     rgb = crop_rgb(image.rgb, roi)
-    mask = can_mask(rgb, roi)
+    if params.segmentation == "color":
+        mask = can_mask(rgb, roi)
+    elif params.segmentation == "geometric":
+        mask, plane = above_plate_mask(
+            image, spec, roi,
+            min_height_m=params.min_height_above_plate_m,
+            threshold_m=params.ransac_threshold_m,
+            iterations=params.ransac_iterations,
+            rng=np.random.default_rng(params.ransac_seed),
+        )
+        log.debug("RANSAC plate plane: %s", plane)
+    else:
+        raise ValueError(f"segmentation must be 'color' or 'geometric', got {params.segmentation!r}")
     comps = separate(mask, min_area_px=min_area_px(spec, image, params.min_area_fraction), erode_px=params.erode_px)
     return roi, rgb, mask, comps
 

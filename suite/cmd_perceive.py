@@ -25,10 +25,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "skipped and named) and print the aggregate (default 1)")
     p.add_argument("--depth-noise-m", type=nonneg_float, default=0.0,
                    help="Gaussian depth noise sigma in metres, with 1%% of depth pixels dropped (default 0)")
+    p.add_argument("--segmentation", choices=("color", "geometric"), default="color",
+                   help="color: the paper's HSV rule (default); geometric: colour-free RANSAC plane removal")
 
 
 def _noise_rng(seed: int) -> np.random.Generator:
     return np.random.default_rng([seed, NOISE_STREAM])
+
+
+def _params(args: argparse.Namespace):
+    from perception.grasps import PerceptionParams
+
+    return PerceptionParams(segmentation=args.segmentation)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -45,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
 
     scene = scene_from_args(args)
     spec = scene.spec
-    res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(scene.seed), all_cameras=bool(args.images))
+    res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(scene.seed), all_cameras=bool(args.images),
+                   params=_params(args))
     out: dict = {
         "detections": [d.to_json() for d in res.detections],
         "timing_s": {"render": round(res.render_time_s, 4), "process": round(res.process_time_s, 4)},
@@ -102,7 +111,7 @@ def _run_many(args: argparse.Namespace) -> int:
             log.warning("seed %d skipped: %s", seed, exc)
             skipped.append(seed)
             continue
-        res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(seed))
+        res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(seed), params=_params(args))
         m = match(res.detections, scene.cans, gate_m=spec.can.radius_m, radius_m=spec.can.radius_m, height_m=spec.can.height_m)
         matches.append(m)
         proc_s.append(res.process_time_s)
@@ -116,10 +125,10 @@ def _run_many(args: argparse.Namespace) -> int:
     timing = {"render_median": round(float(np.median(render_s)), 4), "process_median": round(float(np.median(proc_s)), 4)}
     if args.json:
         print(json.dumps({"variant": spec.variant, "seeds": [args.seed, seed],
-                          "depth_noise_m": args.depth_noise_m, "skipped_seeds": skipped, "evaluation": acc.to_json(), "timing_s": timing}))
+                          "depth_noise_m": args.depth_noise_m, "segmentation": args.segmentation, "skipped_seeds": skipped, "evaluation": acc.to_json(), "timing_s": timing}))
         return 0
     print(f"variant {spec.variant}, seeds {args.seed}..{seed}, "
-          f"depth noise {args.depth_noise_m} m" + (f", skipped seeds (no scene) {skipped}" if skipped else ""))
+          f"depth noise {args.depth_noise_m} m, {args.segmentation} segmentation" + (f", skipped seeds (no scene) {skipped}" if skipped else ""))
     for line in acc.lines():
         print("  " + line)
     print(f"  median time per scene: render {1e3 * timing['render_median']:.0f} ms, "

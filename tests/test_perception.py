@@ -192,3 +192,17 @@ def test_touching_cans_are_split_never_grasped_between(noise_m):
     assert all(m.kind_correct)
     assert max(m.xy_error_m) < 0.006
     assert max(m.yaw_error_rad) < math.radians(3.0)
+
+
+@pytest.mark.parametrize("noise_m", [0.0, 0.002])
+def test_geometric_segmentation_finds_cans_of_any_colour(noise_m):
+    from perception.grasps import PerceptionParams
+
+    scene = generate_scene(SPEC.with_can_color((0.1, 0.3, 0.9, 1.0)), seed=3, check_reachable=False)
+    rng = np.random.default_rng(9)
+    colour = perceive(scene, depth_noise_m=noise_m, rng=rng)
+    assert colour.detections == ()  # blue cans are invisible to the paper's red rule
+    res = perceive(scene, depth_noise_m=noise_m, rng=rng, params=PerceptionParams(segmentation="geometric"))
+    acc = aggregate([_match(res, scene)])
+    assert acc.recall == 1.0 and acc.precision == 1.0 and acc.kind_accuracy == 1.0
+    assert acc.xy_error_median_mm <= (3.0 if noise_m == 0 else 5.0)
