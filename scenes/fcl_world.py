@@ -50,9 +50,9 @@ GRIPPER_ASSEMBLY = frozenset({"iiwa_link_7", "body", "left_finger", "right_finge
 G_INDEX = 8  # index of the gripper body in RobotModel.link_poses
 
 #: Spacing of the spheres covering a cylinder or capsule along its axis, as a fraction of its
-#: radius (outer radius sqrt(1 + f^2 / 4) r: 3% above r for f = 0.5), for pairs with the scene
+#: radius (outer radius sqrt(1 + f^2 / 4) r: 7% above r for f = 0.75), for pairs with the scene
 #: (fine: the scene is where most near misses happen) and between robot parts (coarse: few pairs).
-ENV_SPACING = 0.5
+ENV_SPACING = 0.75
 SELF_SPACING = 2.0
 #: Cells of a self-pair table over its one joint.
 TABLE_CELLS = 1024
@@ -292,6 +292,9 @@ class CollisionWorld:
             can_dims = (spec.can.radius_m, spec.can.height_m)
             parts.append(_Part("held_can", G_INDEX, held.X_GC, "cylinder", can_dims, robot.X_7G))
         self.parts = parts
+        self._req = fcl.CollisionRequest()
+        self._dreq = fcl.DistanceRequest(enable_signed_distance=True)
+        self._fixed_clearance_m = math.inf  # the smallest distance of the pairs left out
 
         # --- scene objects, with their axis-aligned boxes (exact for the static boxes) ---
         self.obstacles: list[tuple[str, fcl.CollisionObject]] = []
@@ -332,16 +335,28 @@ class CollisionWorld:
             if p.name != "iiwa_link_0"  # the base is welded to the static world
             for k, (oname, _) in enumerate(self.obstacles)
             if not (p.name == "held_can" and oname == "plate")  # it rests on the plate at the grasp
+            and not self._never_reaches(p, self.obstacles[k][1])
         ]
         self._build_rows()
         self._build_pairs(env_pairs, self_pairs, obs_c, obs_h, obs_exact)
         self._build_fk()
-        self._req = fcl.CollisionRequest()
-        self._dreq = fcl.DistanceRequest(enable_signed_distance=True)
         self._check = self._make_state_check()
         self.checks = 0  # state checks answered, for planner statistics
 
     # --- construction -----------------------------------------------------------------------------
+
+    def _never_reaches(self, part: _Part, obstacle: fcl.CollisionObject) -> bool:
+        """True if a part round about joint 1's axis (so the same set in space for every q1, e.g.
+        link 1's capsule) is apart from the obstacle: the pair can be left out."""
+        if part.link != 1 or not _on_axis(part.prim, self.robot.joints[0].X_origin):
+            return False
+        X = self.robot.link_poses(np.zeros(7))[1] @ part.X_LS
+        part.obj.setTransform(fcl.Transform(X[:3, :3], X[:3, 3]))
+        d = float(fcl.distance(part.obj, obstacle, self._dreq, fcl.DistanceResult()))
+        if d <= TABLE_MARGIN_M:
+            return False
+        self._fixed_clearance_m = min(self._fixed_clearance_m, d)  # still counts for clearance
+        return True
 
     def _build_rows(self) -> None:
         """Homogeneous rows in link frames, hand first: each part's pose columns, its spheres for
@@ -686,7 +701,7 @@ class CollisionWorld:
         lb = np.full(self._n_env_pp, np.inf)
         pp = self._pp[: self._n_env]
         np.minimum.at(lb, pp[pp >= 0], lb_s[pp >= 0])
-        best = np.inf
+        best = self._fixed_clearance_m
         for k in np.argsort(lb):
             # A bound <= 0 may hide any penetration depth: such pairs are always measured.
             if lb[k] >= best and lb[k] > 0:
