@@ -541,8 +541,13 @@ class CollisionWorld:
         return np.dot(D, self._ones3, out=self._d2)
 
     def _batch_d2(self, rows: np.ndarray) -> np.ndarray:
-        D = np.take(rows, self._iab[0], axis=1) - np.take(rows, self._iab[1], axis=1)
+        """`_state_d2` for a batch of world rows (M, rows, 3): (M, P)."""
+        m, n = rows.shape[:2]
+        idx = (self._iab[:, None, :] + (n * np.arange(m))[None, :, None]).reshape(2, -1)
+        G = rows.reshape(m * n, 3).take(idx, axis=0)  # row gathers: much faster than take(axis=1)
+        D = np.subtract(G[0], G[1], out=G[0])
         np.abs(D, out=D)
+        D = D.reshape(m, -1, 3)
         D -= self._H
         np.maximum(D, 0.0, out=D)
         D *= D
