@@ -60,9 +60,11 @@ def grasp_yaw(*, p_xy_m, lying: bool, axis_yaw_rad: float) -> float:
     With roll -pi/2, the gripper's z axis points along world (-sin yaw, cos yaw): for a lying can
     it must lie along the can's axis (the fingers, along x, then close across the diameter), so
     yaw = axis_yaw - pi/2, modulo pi. Of the two (or, for an upright can, of all) choices, take
-    the one closest to a gripper facing away from the robot base, which keeps the wrist unwound.
+    the one closest to the "natural" yaw, whose gripper z axis points back at the robot base: the
+    iiwa reaches it with joint 7 near the middle of its range (the opposite yaw puts joint 7 at
+    about 3.0 rad, against its 3.05 limit, and the next wrist turn then flips the IK branch).
     """
-    natural = math.atan2(p_xy_m[1], p_xy_m[0]) - math.pi / 2
+    natural = math.atan2(p_xy_m[1], p_xy_m[0]) + math.pi / 2
     if not lying:
         return _wrap(natural)
     base = axis_yaw_rad - math.pi / 2

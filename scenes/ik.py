@@ -25,6 +25,7 @@ class IkOptions:
     orientation_tolerance_rad: float = 1e-2
     min_distance_m: float = 1e-3
     influence_distance_m: float = 0.05
+    near_sigmas_rad: tuple[float, ...] = (0.1, 0.25, 0.5)
     restarts: int = 4
     major_iterations: int = 150
 
@@ -52,17 +53,21 @@ class PoseIk:
     ) -> np.ndarray | None:
         """A collision-free configuration reaching X_WG, or None.
 
-        Tries q_seed first, then `options.restarts` random seeds within the joint limits; among
-        the solutions it keeps the one closest to q_seed.
+        Tries q_seed first, then seeds perturbed around it (so that a solution on the same IK
+        branch is found when one exists), then `options.restarts` random seeds within the joint
+        limits; it stops at the first success of the near seeds, and otherwise keeps the random
+        restarts' solution closest to q_seed.
         """
         X = RigidTransform(X_WG)
         solver_options = SolverOptions()
         # A failing solve otherwise grinds on for a second; real solutions come in far fewer.
         solver_options.SetOption(SnoptSolver.id(), "Major iterations limit", options.major_iterations)
         best, best_d = None, np.inf
-        seeds = [np.asarray(q_seed, float)] + [
-            rng.uniform(self.lower, self.upper) for _ in range(options.restarts)
-        ]
+        q0 = np.asarray(q_seed, float)
+        near = [np.clip(q0 + rng.normal(0.0, sigma, 7), self.lower, self.upper) for sigma in options.near_sigmas_rad]
+        far = [rng.uniform(self.lower, self.upper) for _ in range(options.restarts)]
+        seeds = [q0] + near + far
+        n_near = 1 + len(near)
         for i, seed in enumerate(seeds):
             ik = InverseKinematics(self.plant, self.plant_context)
             q = ik.q()
@@ -82,6 +87,6 @@ class PoseIk:
                 d = float(np.linalg.norm(sol - q_seed))
                 if d < best_d:
                     best, best_d = sol, d
-                if i == 0:
-                    break  # the seed itself led to a solution: deterministic and closest
+                if i < n_near:
+                    break  # the seed or a seed near it: on q_seed's branch
         return best
