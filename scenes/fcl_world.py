@@ -149,8 +149,12 @@ class _Prim(NamedTuple):
     X_LS: np.ndarray
 
 
+#: Table cell values: not proved either way (ask FCL), proved apart, proved in collision.
+UNKNOWN, APART, TOUCHING = 0, 1, 2
+
+
 class _PairTable:
-    """Cells of one joint's range where a self pair is proved apart: `safe(q)` for q as a list."""
+    """One joint's range in cells, each UNKNOWN, APART or TOUCHING for a self pair."""
 
     __slots__ = ("joint", "lower_rad", "cells_per_rad", "cells")
 
@@ -158,12 +162,13 @@ class _PairTable:
         self.joint, self.lower_rad, self.cells_per_rad, self.cells = joint, lower_rad, cells_per_rad, cells
 
     @property
-    def always_safe(self) -> bool:
-        return all(self.cells)
+    def always_apart(self) -> bool:
+        return all(c == APART for c in self.cells)
 
-    def safe(self, q: list[float]) -> bool:
+    def cell(self, q: list[float]) -> int:
+        """The cell value at configuration q (UNKNOWN outside the joint's range)."""
         x = (q[self.joint] - self.lower_rad) * self.cells_per_rad if self.joint >= 0 else 0.0
-        return 0.0 <= x < len(self.cells) and bool(self.cells[int(x)])
+        return self.cells[int(x)] if 0.0 <= x < len(self.cells) else UNKNOWN
 
 
 _TABLES: dict[tuple, _PairTable | None] = {}
@@ -201,18 +206,21 @@ def _pair_table(robot: RobotModel, a: _Prim, b: _Prim) -> _PairTable | None:
     joints = list(range(a.link, b.link))  # q indices of joints a.link + 1 .. b.link
     if joints and _on_axis(a, robot.joints[joints[0]].X_origin):
         joints = joints[1:]  # a is round about the first joint: its angle does not matter
+    enclosed = False
     if joints and joints[-1] == b.link - 1 and not _on_axis(b, np.eye(4)) and len(joints) == 2 and b.kind == "box":
-        b = _revolved(b)  # bound b over its own joint's turn
+        b, enclosed = _revolved(b), True  # bound b over its own joint's turn
     if joints and joints[-1] == b.link - 1 and _on_axis(b, np.eye(4)):
         joints = joints[:-1]
     table = _build_table(robot, a, b, joints[0] if joints else -1) if len(joints) <= 1 else None
+    if table is not None and enclosed:  # the enclosure touching proves nothing about b itself
+        table.cells = bytearray(APART if c == APART else UNKNOWN for c in table.cells)
     _TABLES[key] = table
     return table
 
 
 def _build_table(robot: RobotModel, a: _Prim, b: _Prim, joint: int) -> _PairTable:
-    """Prove cells apart by the FCL signed distance at a run of cells' centre minus a Lipschitz
-    bound, halving runs only where unproved.
+    """Prove cells apart (or in collision) by the FCL signed distance at a run of cells' centre
+    minus (plus) a Lipschitz bound, halving runs only where unproved.
 
     Turning joint `joint` by dq moves any point p of b by at most |dq| |p - o| (o, the origin of
     the link it turns, lies on its axis); |p - o| is bounded by the joint offsets from o to b's
@@ -233,7 +241,7 @@ def _build_table(robot: RobotModel, a: _Prim, b: _Prim, joint: int) -> _PairTabl
         return float(fcl.distance(oa, ob, req, fcl.DistanceResult()))
 
     if joint < 0:
-        return _PairTable(-1, 0.0, 0.0, bytearray([dist(0.0) > TABLE_MARGIN_M]))
+        return _PairTable(-1, 0.0, 0.0, bytearray([APART if dist(0.0) > TABLE_MARGIN_M else UNKNOWN]))
     reach = float(np.linalg.norm(b.X_LS[:3, 3])) + _bounding_radius(b.kind, b.dims)
     rho = reach + sum(float(np.linalg.norm(robot.joints[m].X_origin[:3, 3])) for m in range(joint + 1, b.link))
     n = TABLE_CELLS
@@ -246,8 +254,10 @@ def _build_table(robot: RobotModel, a: _Prim, b: _Prim, joint: int) -> _PairTabl
         d = dist(lo + (i0 + i1) / 2 * step)
         bound = rho * (i1 - i0) / 2 * step
         if d - bound > TABLE_MARGIN_M:
-            cells[i0:i1] = b"\x01" * (i1 - i0)
-        elif d + bound >= 0 and i1 - i0 > 1:  # else it collides throughout, or one unproved cell
+            cells[i0:i1] = bytes([APART]) * (i1 - i0)
+        elif d + bound < -TABLE_MARGIN_M:
+            cells[i0:i1] = bytes([TOUCHING]) * (i1 - i0)
+        elif i1 - i0 > 1:  # else one unproved cell
             stack += [(i0, (i0 + i1) // 2), ((i0 + i1) // 2, i1)]
     return _PairTable(joint, lo, 1.0 / step, cells)
 
@@ -421,7 +431,7 @@ class CollisionWorld:
             if a.link > b.link:
                 i, j, a, b = j, i, b, a
             table = None if "held_can" in (a.name, b.name) else _pair_table(self.robot, a.prim, b.prim)
-            if table is not None and table.always_safe:
+            if table is not None and table.always_apart:
                 continue  # they never touch within the joint limits
             k = new_pair(i, (j, None))
             if table is not None:
@@ -612,7 +622,10 @@ class CollisionWorld:
             unsafe = []
             for j, lo, inv, n, cells, k in tables:
                 x = (ql[j] - lo) * inv
-                if not 0.0 <= x < n or not cells[int(x)]:
+                c = cells[int(x)] if 0.0 <= x < n else UNKNOWN
+                if c != APART:
+                    if c == TOUCHING:
+                        return False  # a self pair proved in collision in this joint cell
                     unsafe.append(k)
             if not len(hits) and not unsafe:
                 return True
@@ -637,16 +650,19 @@ class CollisionWorld:
             d2 = self._batch_d2(rows)
             near = d2 <= self._R2
             flagged = near.any(axis=1)
+            touching = np.zeros(len(Qc), bool)
             unsafe = [[] for _ in range(len(Qc))]
             for j, lo, inv, n, cells, k in self._tables:
                 x = (Qc[:, j] - lo) * inv
-                ok = (x >= 0.0) & (x < n)
-                ok[ok] = np.frombuffer(cells, np.uint8)[x[ok].astype(int)].astype(bool)
-                for m in np.flatnonzero(~ok):
+                inside = (x >= 0.0) & (x < n)
+                c = np.full(len(Qc), UNKNOWN, np.uint8)
+                c[inside] = np.frombuffer(cells, np.uint8)[x[inside].astype(int)]
+                touching |= c == TOUCHING
+                for m in np.flatnonzero(c == UNKNOWN):
                     unsafe[m].append(k)
-                flagged |= ~ok
+                flagged |= c != APART
             for m in np.flatnonzero(flagged):
-                if self._collides(rows[m], d2[m], near[m].nonzero()[0], unsafe[m]):
+                if touching[m] or self._collides(rows[m], d2[m], near[m].nonzero()[0], unsafe[m]):
                     out[start + m] = False
                     if stop_at_first:
                         return out

@@ -47,6 +47,23 @@ def drake_checker(scene, *, held=None, gripper_opening_m: float | None = None, e
     )
 
 
+def _scene_graph_query(scene):
+    """`has_collisions(q)` straight from the plan-mode scene graph (SetPositions, then
+    QueryObject.HasCollisions): Drake's leanest single-state route, for reference."""
+    from scenes.drake_scene import build_drake_scene
+
+    ds = build_drake_scene(scene, mode="plan", cameras=False)
+    context = ds.diagram.CreateDefaultContext()
+    plant, plant_context = ds.plant, ds.plant.GetMyContextFromRoot(context)
+    port, sg_context = ds.scene_graph.get_query_output_port(), ds.scene_graph.GetMyContextFromRoot(context)
+
+    def has_collisions(q) -> bool:
+        plant.SetPositions(plant_context, q)
+        return port.Eval(sg_context).HasCollisions()
+
+    return has_collisions
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--configs", type=positive_int, default=2000, help="random configurations per variant (default 2000)")
     p.add_argument("--seed", type=nonneg_int, default=0, help="scene seed (default 0)")
@@ -70,24 +87,32 @@ def _bench_variant(variant: str, args: argparse.Namespace) -> dict:
     t0 = time.perf_counter()
     checker = drake_checker(scene)
     build_drake_s = time.perf_counter() - t0
+    has_collisions = _scene_graph_query(scene)
     Q = world.robot.random_configurations(np.random.default_rng(CONFIG_SEED), args.configs)
-    for q in Q[:50]:  # warm up both (caches, first-call costs)
+    for q in Q[:50]:  # warm up all (caches, first-call costs)
         world.is_free(q)
         checker.CheckConfigCollisionFree(q)
+        has_collisions(q)
 
     perf = time.perf_counter
-    t_fcl, t_drake, free_fcl, free_drake = [], [], [], []
-    for q in Q:  # interleaved: both see the same machine load
+    t_fcl, t_drake, t_query, free_fcl, free_drake, free_query = [], [], [], [], [], []
+    for q in Q:  # interleaved: all see the same machine load (and caches the others left)
         t0 = perf()
         a = world.is_free(q)
         t1 = perf()
         b = checker.CheckConfigCollisionFree(q)
         t2 = perf()
+        c = not has_collisions(q)
+        t3 = perf()
         t_fcl.append(t1 - t0)
         t_drake.append(t2 - t1)
+        t_query.append(t3 - t2)
         free_fcl.append(a)
         free_drake.append(b)
+        free_query.append(c)
     free_fcl, free_drake = np.array(free_fcl), np.array(free_drake)
+    if not np.array_equal(free_query, free_drake):
+        log.warning("%s: QueryObject.HasCollisions differs from the collision checker", variant)
 
     t0 = perf()
     batch = world.states_free(Q)
@@ -115,6 +140,7 @@ def _bench_variant(variant: str, args: argparse.Namespace) -> dict:
         "drake_us": _median_us(t_drake),
         "fcl_free_us": _median_us([t for t, f in zip(t_fcl, free_fcl) if f]),
         "fcl_coll_us": _median_us([t for t, f in zip(t_fcl, free_fcl) if not f]),
+        "query_us": _median_us(t_query),
         "batch_fcl_us": batch_fcl_us,
         "batch_drake_us": batch_drake_us,
         "clearance_us": _median_us(t_clear),
@@ -127,14 +153,17 @@ def run(args: argparse.Namespace) -> int:
     rows = [_bench_variant(v, args) for v in args.variants]
     print(f"collision state checks: {args.configs} random configurations per variant (uniform in the joint "
           f"limits, seed {CONFIG_SEED}), scene seed {args.seed}, {args.cans} cans; medians, timed side by side")
+    print("  drake us: SceneGraphCollisionChecker.CheckConfigCollisionFree; ratio = fcl / drake; "
+          "HasCollisions us: SetPositions + QueryObject.HasCollisions on the plan-mode diagram; "
+          "batch: per configuration, states_free vs CheckConfigsCollisionFree (one thread)")
     head = ("variant", "free", "agree", "fcl is_free us", "drake us", "ratio", "fcl free/coll us",
-            "batch fcl/drake us", "clearance us", "build fcl/drake s")
+            "HasCollisions us", "batch fcl/drake us", "clearance us", "build fcl/drake s")
     lines = [head]
     for r in rows:
         lines.append((
             r["variant"], f"{r['free_rate']:.3f}", f"{r['agreement']:.4f} ({r['disagreements']})",
             f"{r['fcl_us']:.1f}", f"{r['drake_us']:.1f}", f"{r['fcl_us'] / r['drake_us']:.2f}",
-            f"{r['fcl_free_us']:.1f} / {r['fcl_coll_us']:.1f}",
+            f"{r['fcl_free_us']:.1f} / {r['fcl_coll_us']:.1f}", f"{r['query_us']:.1f}",
             f"{r['batch_fcl_us']:.1f} / {r['batch_drake_us']:.1f}", f"{r['clearance_us']:.1f}",
             f"{r['build_fcl_s']:.3f} / {r['build_drake_s']:.3f}",
         ))
