@@ -12,20 +12,23 @@ cheaper can decide:
 1. Kinematics on points. Every point the checks need (bounding-sphere centres, and the four
    rows of each part's pose) is stored as a homogeneous row in its link's frame; rows are
    ordered from the hand down to the base, so applying the local joint transforms from joint 7
-   to joint 1 is seven `np.dot` calls on growing leading blocks of one array.
+   to joint 1 is seven `np.dot` calls on growing leading blocks of small buffers.
 2. Bounding spheres. Each primitive is covered by spheres (outer radius) that also contain an
-   inner ball lying inside the primitive (inner radius). One pass over all (sphere, obstacle-box)
-   and (sphere, sphere) pairs gives squared distances: no outer overlap means free; an inner
-   overlap with a true box or another robot part means a certain collision.
-3. Joint-space tables. A self pair whose relative pose depends on at most two joints (after
-   dropping a joint about whose axis a shape is round, e.g. link 5 against link 7 depends on
-   q6 only) gets a table over those joints, proved once per process by FCL distances and a
-   Lipschitz bound: cells where the pair cannot touch are skipped without an exact query.
-   These are the wrist pairs whose spheres always overlap (their flat faces sit millimetres
-   apart).
+   inner ball lying inside the primitive (inner radius). One gather and six array operations
+   give the squared distance of every (sphere, obstacle box) and (sphere, sphere) pair: no
+   outer overlap means free; an inner overlap with a true box or another robot part means a
+   certain collision.
+3. Joint tables. A self pair whose distance depends on one joint only (after dropping a joint
+   about whose axis a shape is round, and enclosing a box in the cylinder it sweeps about its
+   own joint: link 5 against link 7 or the gripper body depends on q6 only) gets a table of
+   that joint's range, proved once per process from FCL signed distances and a Lipschitz bound:
+   cells where the pair is apart, or (exact shapes only) in collision, need no query. These are
+   the wrist and elbow pairs whose spheres always overlap (flat faces millimetres apart).
+   Parts round about joint 1 that never reach an obstacle (link 1) drop those pairs likewise.
 4. Exact FCL `collide` for what remains.
 
 None of the shortcuts changes an answer: each one only skips a query whose result it has proved.
+The single-state path works in buffers owned by the world: one world per thread.
 
 Filtering mirrors the Drake scene: pairs joined by a joint, the always-touching pairs of
 `robot_model.ALWAYS_TOUCHING`, the rigid gripper assembly (link 7, gripper body, fingers, held
@@ -56,7 +59,8 @@ ENV_SPACING = 0.75
 SELF_SPACING = 2.0
 #: Cells of a self-pair table over its one joint.
 TABLE_CELLS = 1024
-#: A table cell is safe only if the pair's distance bound exceeds this (FCL's own tolerance is far smaller).
+#: A table cell is proved only if the pair's distance bound clears zero by this (FCL's own
+#: tolerance is far smaller).
 TABLE_MARGIN_M = 1e-4
 #: States per chunk in the batched checks (bounds memory; a colliding early chunk ends the scan).
 CHUNK = 64
@@ -122,6 +126,15 @@ def _bounding_radius(kind: str, dims) -> float:
     return r + length / 2 if kind == "capsule" else math.hypot(r, length / 2)
 
 
+class _Prim(NamedTuple):
+    """A primitive fixed to chain link `link` (0..7) at pose X_LS."""
+
+    kind: str
+    dims: tuple
+    link: int
+    X_LS: np.ndarray
+
+
 class _Part:
     """One collision primitive of the robot, riding on FK body `body` (0..8)."""
 
@@ -140,15 +153,6 @@ class _Part:
         return _Prim(self.kind, self.dims, self.link, self.X_LS)
 
 
-class _Prim(NamedTuple):
-    """A primitive fixed to chain link `link` (0..7) at pose X_LS."""
-
-    kind: str
-    dims: tuple
-    link: int
-    X_LS: np.ndarray
-
-
 #: Table cell values: not proved either way (ask FCL), proved apart, proved in collision.
 UNKNOWN, APART, TOUCHING = 0, 1, 2
 
@@ -164,11 +168,6 @@ class _PairTable:
     @property
     def always_apart(self) -> bool:
         return all(c == APART for c in self.cells)
-
-    def cell(self, q: list[float]) -> int:
-        """The cell value at configuration q (UNKNOWN outside the joint's range)."""
-        x = (q[self.joint] - self.lower_rad) * self.cells_per_rad if self.joint >= 0 else 0.0
-        return self.cells[int(x)] if 0.0 <= x < len(self.cells) else UNKNOWN
 
 
 _TABLES: dict[tuple, _PairTable | None] = {}
@@ -199,8 +198,8 @@ def _revolved(prim: _Prim) -> _Prim:
 def _pair_table(robot: RobotModel, a: _Prim, b: _Prim) -> _PairTable | None:
     """A proved table for self pair (a, b), a on the lower link, over the one joint their
     distance depends on, or None when it depends on more. Cached per process."""
-    key = (id(robot), robot.joints[0].X_origin.tobytes(), a.kind, a.dims, a.link, a.X_LS.round(12).tobytes(),
-           b.kind, b.dims, b.link, b.X_LS.round(12).tobytes())
+    chain = tuple((j.X_origin.tobytes(), j.lower_rad, j.upper_rad) for j in robot.joints)
+    key = (chain, a.kind, a.dims, a.link, a.X_LS.round(12).tobytes(), b.kind, b.dims, b.link, b.X_LS.round(12).tobytes())
     if key in _TABLES:
         return _TABLES[key]
     joints = list(range(a.link, b.link))  # q indices of joints a.link + 1 .. b.link
