@@ -22,23 +22,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--seed", type=nonneg_int, default=0, help="first scene seed (default 0)")
     p.add_argument("--frames", type=positive_int, default=20, help="frames to time (default 20)")
+    p.add_argument("--segmentation", choices=("color", "geometric"), default="color",
+                   help="segmentation to time (default color, the paper's)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
-def measure(*, seed: int = 0, frames: int = 20) -> dict:
+def measure(*, seed: int = 0, frames: int = 20, segmentation: str = "color") -> dict:
     """Time rendering and processing of `frames` top-camera frames from `BENCH_SCENES` scenes.
 
     Returns:
         Milliseconds: medians and p95 of processing and rendering per frame, and the median
         scene build (Drake diagram with cameras).
     """
-    from perception.grasps import detect_cans
+    from perception.grasps import PerceptionParams, detect_cans
     from perception.observe import observe
     from scenes.drake_scene import build_drake_scene
     from scenes.generate import generate_scene
     from scenes.spec import load_spec
 
     spec = load_spec()
+    params = PerceptionParams(segmentation=segmentation)
     build_ms, render_ms, process_ms = [], [], []
     per_scene = max(1, -(-frames // BENCH_SCENES))
     done = 0
@@ -54,7 +57,7 @@ def measure(*, seed: int = 0, frames: int = 20) -> dict:
             t0 = time.perf_counter()
             image = observe(scene, cameras=["top"], drake_scene=ds)["top"]
             t1 = time.perf_counter()
-            detect_cans(image, spec)
+            detect_cans(image, spec, params)
             t2 = time.perf_counter()
             render_ms.append(1e3 * (t1 - t0))
             process_ms.append(1e3 * (t2 - t1))
@@ -62,6 +65,7 @@ def measure(*, seed: int = 0, frames: int = 20) -> dict:
     # The first frame pays for imports and warm caches; it is reported in the max only.
     return {
         "frames": done,
+        "segmentation": segmentation,
         "frame_px": [spec.cameras.width_px, spec.cameras.height_px],
         "process_median_ms": round(float(np.median(process_ms[1:] or process_ms)), 2),
         "process_p95_ms": round(float(np.percentile(process_ms[1:] or process_ms, 95)), 2),
@@ -79,12 +83,13 @@ def run(args: argparse.Namespace) -> int:
     frames = getattr(args, "frames", 20) or 20
     if frames < 1:
         raise SuiteError(f"--frames must be a positive integer, got {frames}")
-    r = measure(seed=getattr(args, "seed", 0) or 0, frames=frames)
+    r = measure(seed=getattr(args, "seed", 0) or 0, frames=frames,
+                segmentation=getattr(args, "segmentation", "color") or "color")
     if getattr(args, "json", False):
         print(json.dumps({"perception": r}))
         return 0
     w, h = r["frame_px"]
-    print(f"perception, {r['frames']} top-camera frames of {w}x{h}:")
+    print(f"perception ({r['segmentation']} segmentation), {r['frames']} top-camera frames of {w}x{h}:")
     print(f"  processing (crop .. grasps): median {r['process_median_ms']:.1f} ms, p95 {r['process_p95_ms']:.1f} ms, "
           f"first/max {r['process_max_ms']:.1f} ms")
     print(f"  rendering (RenderEngineVtk): median {r['render_median_ms']:.1f} ms, p95 {r['render_p95_ms']:.1f} ms")
