@@ -206,3 +206,20 @@ def test_geometric_segmentation_finds_cans_of_any_colour(noise_m):
     acc = aggregate([_match(res, scene)])
     assert acc.recall == 1.0 and acc.precision == 1.0 and acc.kind_accuracy == 1.0
     assert acc.xy_error_median_mm <= (3.0 if noise_m == 0 else 5.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("variant", ["open", "wall"])
+def test_accuracy_targets_on_50_scenes(variant, capsys):
+    from suite.cli import main
+
+    for noise in ("0", "0.002"):
+        assert main(["perceive", "--evaluate", "--scenes", "50", "--variant", variant,
+                     "--depth-noise-m", noise, "--json"]) == 0
+        ev = json.loads(capsys.readouterr().out)["evaluation"]
+        if noise == "0":
+            assert ev["recall"] == 1.0 and ev["precision"] == 1.0 and ev["kind_accuracy"] == 1.0
+            assert ev["xy_error_median_mm"] <= 3.0 and ev["xy_error_p95_mm"] <= 6.0
+            assert ev["yaw_error_median_deg"] <= 2.0 and ev["yaw_error_p95_deg"] <= 5.0
+        else:
+            assert ev["recall"] >= 0.98 and ev["xy_error_median_mm"] <= 5.0
