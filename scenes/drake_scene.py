@@ -75,11 +75,12 @@ def look_at(p_m, target_m) -> RigidTransform:
     return RigidTransform(RotationMatrix(np.column_stack([x, y, z])), p)
 
 
-def _add_box(plant, name, box, friction):
+def _add_box(plant, name, box, friction, body=None):
     X = RigidTransform(np.asarray(box.center_m))
     shape = DrakeBox(*box.size_m)
-    plant.RegisterVisualGeometry(plant.world_body(), X, shape, name, np.asarray(box.color_rgba))
-    return plant.RegisterCollisionGeometry(plant.world_body(), X, shape, name, friction)
+    body = body or plant.world_body()
+    plant.RegisterVisualGeometry(body, X, shape, name, np.asarray(box.color_rgba))
+    return plant.RegisterCollisionGeometry(body, X, shape, name, friction)
 
 
 def _can_inertia(spec) -> SpatialInertia:
@@ -130,7 +131,13 @@ def add_scene_to_plant(
             plant.WeldFrames(body_frame, plant.GetFrameByName(name, wsg), RigidTransform(X_GF))
 
     friction = CoulombFriction(0.9, 0.8)
-    statics = {name: _add_box(plant, name, box, friction) for name, box in spec.static_boxes().items()}
+    # The plate is a body of its own (welded to the world) so that the held-can-vs-plate filter
+    # is a filter between two bodies, which Drake's collision checker requires.
+    scene_instance = plant.AddModelInstance("scene")
+    plate_body = plant.AddRigidBody("plate", scene_instance, SpatialInertia.Zero())
+    plant.WeldFrames(plant.world_frame(), plate_body.body_frame())
+    for name, box in spec.static_boxes().items():
+        _add_box(plant, name, box, friction, plate_body if name == "plate" else None)
 
     can_shape = Cylinder(spec.can.radius_m, spec.can.height_m)
     color = np.asarray(spec.can.color_rgba)
@@ -146,23 +153,26 @@ def add_scene_to_plant(
             plant.WeldFrames(plant.world_frame(), body.body_frame(), RigidTransform(can.X_WC()))
         else:
             plant.SetDefaultFloatingBaseBodyPose(body, RigidTransform(can.X_WC()))
-    held_gid = None
+    held_body = None
     if held is not None:
         if mode != "plan":
             raise ValueError("a held can is only modelled in 'plan' mode")
-        body = plant.AddRigidBody("held_can", cans_instance, _can_inertia(spec))
+        # In the gripper's model instance: the can is part of the robot for collision checkers
+        # that split robot from environment by model instance.
+        body = plant.AddRigidBody("held_can", wsg, _can_inertia(spec))
         plant.RegisterVisualGeometry(body, RigidTransform(), can_shape, "held_can", color)
-        held_gid = plant.RegisterCollisionGeometry(body, RigidTransform(), can_shape, "held_can", friction)
+        plant.RegisterCollisionGeometry(body, RigidTransform(), can_shape, "held_can", friction)
         plant.WeldFrames(plant.GetFrameByName("body", wsg), body.body_frame(), RigidTransform(held.X_GC))
+        held_body = body
 
     plant.Finalize()
     scene_graph.collision_filter_manager().Apply(
-        _filters(plant, iiwa, wsg, statics.get("plate"), held_gid)
+        _filters(plant, iiwa, wsg, plate_body, held_body)
     )
     return iiwa, wsg
 
 
-def _filters(plant, iiwa, wsg, plate_gid, held_gid) -> CollisionFilterDeclaration:
+def _filters(plant, iiwa, wsg, plate_body, held_body) -> CollisionFilterDeclaration:
     """The filters shared with the python-fcl world (see `scenes.fcl_world`).
 
     Drake itself already filters bodies joined by a joint and bodies welded into one rigid
@@ -176,10 +186,11 @@ def _filters(plant, iiwa, wsg, plate_gid, held_gid) -> CollisionFilterDeclaratio
 
     for a, b in ALWAYS_TOUCHING:
         decl.ExcludeBetween(body_set(a), body_set(b))
-    if held_gid is not None and plate_gid is not None:
+    if held_body is not None:
         # The held can rests on the plate at the grasp: that contact is allowed (as MoveIt allows
         # an attached object to touch its support surface).
-        decl.ExcludeBetween(GeometrySet(held_gid), GeometrySet(plate_gid))
+        decl.ExcludeBetween(plant.CollectRegisteredGeometries([held_body]),
+                            plant.CollectRegisteredGeometries([plate_body]))
     return decl
 
 
