@@ -364,7 +364,7 @@ class CollisionWorld:
         d = float(fcl.distance(part.obj, obstacle, self._dreq, fcl.DistanceResult()))
         if d <= TABLE_MARGIN_M:
             return False
-        self._fixed_clearance_m = min(self._fixed_clearance_m, d)  # still counts for clearance
+        self._fixed_clearance_m = min(self._fixed_clearance_m, d)  # kept for reference only
         return True
 
     def _build_rows(self) -> None:
@@ -712,7 +712,10 @@ class CollisionWorld:
 
         Negative in penetration (FCL's signed distance, enabled explicitly: by default
         python-fcl reports -1 for any colliding pair). Exact FCL distances are computed only for
-        pairs whose bounding-sphere lower bound could beat the best found so far.
+        pairs whose bounding-sphere lower bound could beat the best found so far. Pairs whose
+        distance does not depend on q (the base, and link 1 which only spins about its vertical
+        axis, against the static world) are left out: they would cap every path's clearance at
+        the same constant (0.0725 m, link 1 over the table) and hide the differences that matter.
         """
         rows = self._state_rows(np.asarray(q, float))
         d2 = self._state_d2(rows)[: self._n_env]
@@ -721,7 +724,7 @@ class CollisionWorld:
         lb = np.full(self._n_env_pp, np.inf)
         pp = self._pp[: self._n_env]
         np.minimum.at(lb, pp[pp >= 0], lb_s[pp >= 0])
-        best = self._fixed_clearance_m
+        best = math.inf
         for k in np.argsort(lb):
             # A bound <= 0 may hide any penetration depth: such pairs are always measured.
             if lb[k] >= best and lb[k] > 0:

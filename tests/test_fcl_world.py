@@ -39,7 +39,14 @@ def _drake_env_distance(checker, q) -> float:
     from pydrake.planning import RobotCollisionType
 
     rc = checker.CalcRobotClearance(q, 10.0)
-    return min(d for d, t in zip(rc.distances(), rc.collision_types()) if t == RobotCollisionType.kEnvironmentCollision)
+    plant = checker.plant()
+    # Links whose distance to the scene does not depend on q are not part of the clearance.
+    fixed = {plant.GetBodyByName(n).index() for n in ("iiwa_link_0", "iiwa_link_1")}
+    return min(
+        d
+        for d, t, b in zip(rc.distances(), rc.collision_types(), rc.robot_indices())
+        if t == RobotCollisionType.kEnvironmentCollision and b not in fixed
+    )
 
 
 def _drake_min_distance(checker, q) -> float:

@@ -146,6 +146,9 @@ def drake_clearances(ds, Q: np.ndarray) -> np.ndarray:
         body = plant.GetBodyFromFrameId(inspector.GetFrameId(gid))
         return body.model_instance() in robot_instances or body.name() == "held_can"
 
+    def fixed(gid):  # links whose distance to the scene does not depend on q: not in clearance
+        return plant.GetBodyFromFrameId(inspector.GetFrameId(gid)).name() in ("iiwa_link_0", "iiwa_link_1")
+
     out = []
     for q in Q:
         plant.SetPositions(pctx, q)
@@ -153,7 +156,7 @@ def drake_clearances(ds, Q: np.ndarray) -> np.ndarray:
         best = np.inf
         for pair in query.ComputeSignedDistancePairwiseClosestPoints():
             ra, rb = is_robot(pair.id_A), is_robot(pair.id_B)
-            if ra != rb:
+            if ra != rb and not fixed(pair.id_A) and not fixed(pair.id_B):
                 best = min(best, pair.distance)
         out.append(best)
     return np.array(out)
