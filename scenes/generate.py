@@ -13,8 +13,9 @@ from suite.errors import SuiteError
 
 log = logging.getLogger(__name__)
 
-MAX_PLACEMENT_TRIES = 500
-MAX_LAYOUT_RESTARTS = 100
+MAX_PLACEMENT_TRIES = 300
+MAX_LAYOUT_RESTARTS = 200
+LAYOUTS_PER_DRAW = 25
 MAX_REACH_ROUNDS = 20
 
 
@@ -50,9 +51,8 @@ def capacity_bound(spec: SceneSpec) -> int:
     return int(usable / (math.pi * r * r))
 
 
-def _sample_can(rng: np.random.Generator, spec: SceneSpec, can_id: int) -> CanPose | None:
+def _sample_can(rng: np.random.Generator, spec: SceneSpec, can_id: int, lying: bool) -> CanPose | None:
     r, h = spec.can.radius_m, spec.can.height_m
-    lying = bool(rng.random() < spec.cans.lying_probability)
     yaw = float(rng.uniform(-math.pi, math.pi))
     cx, cy, _ = spec.plate.center_m
     sx, sy = spec.plate.size_m[:2]
@@ -72,16 +72,27 @@ def _sample_can(rng: np.random.Generator, spec: SceneSpec, can_id: int) -> CanPo
     return can
 
 
-def _place(rng, spec, can_id, others) -> CanPose | None:
+def _place(rng, spec, can_id, others, lying: bool) -> CanPose | None:
     """A can at least min_gap from the others, or None if random draws found no room."""
     r, h = spec.can.radius_m, spec.can.height_m
     for _ in range(MAX_PLACEMENT_TRIES):
-        can = _sample_can(rng, spec, can_id)
+        can = _sample_can(rng, spec, can_id, lying)
         if can is None:
             continue
-        if all(_footprint_distance(can, o, r, h) >= spec.cans.min_gap_m for o in others):
+        if all(_far_enough(can, o, r, h, spec.cans.min_gap_m) for o in others):
             return can
     return None
+
+
+def _far_enough(a: CanPose, b: CanPose, r: float, h: float, gap: float) -> bool:
+    """Footprints at least `gap` apart; circle bounds settle most pairs without FCL."""
+    d = math.dist(a.p_WC_m[:2], b.p_WC_m[:2])
+    outer = [math.hypot(h / 2, r) if c.lying else r for c in (a, b)]
+    if d >= outer[0] + outer[1] + gap:
+        return True
+    if d < 2 * r + gap:  # each footprint contains the disc of radius r about its centre
+        return False
+    return _footprint_distance(a, b, r, h) >= gap
 
 
 def _cannot_place(spec) -> SuiteError:
@@ -92,16 +103,26 @@ def _cannot_place(spec) -> SuiteError:
 
 
 def _layout(rng, spec) -> list[CanPose]:
-    """All cans placed one after another; a layout that boxes itself in is drawn again."""
-    for _ in range(MAX_LAYOUT_RESTARTS):
-        cans: list[CanPose] = []
-        for i in range(spec.cans.count):
-            can = _place(rng, spec, i, cans)
+    """All cans placed one after another; a layout that boxes itself in is drawn again.
+
+    Which cans lie is drawn before any position: redrawing it with every rejected position would
+    favour upright cans, whose smaller footprints are rejected less often. Lying cans (the larger
+    footprints) are placed first. Only when random packing fails LAYOUTS_PER_DRAW times in a row
+    for one draw (many lying cans on a small plate) is it drawn again.
+    """
+    n = spec.cans.count
+    for attempt in range(MAX_LAYOUT_RESTARTS):
+        if attempt % LAYOUTS_PER_DRAW == 0:
+            lying = rng.random(n) < spec.cans.lying_probability
+            order = sorted(range(n), key=lambda i: not lying[i])
+        placed: dict[int, CanPose] = {}
+        for i in order:
+            can = _place(rng, spec, i, list(placed.values()), bool(lying[i]))
             if can is None:
                 break
-            cans.append(can)
+            placed[i] = can
         else:
-            return cans
+            return [placed[i] for i in range(n)]
     raise _cannot_place(spec)
 
 
@@ -151,7 +172,7 @@ def generate_scene(spec: SceneSpec, *, seed: int, check_reachable: bool = True) 
         log.debug("seed %d round %d: redrawing unreachable cans %s", seed, round_, bad)
         for i in bad:
             others = [c for c in cans if c.id != i]
-            can = _place(rng, spec, i, others)
+            can = _place(rng, spec, i, others, cans[i].lying)
             if can is None:
                 cans = _layout(rng, spec)
                 break

@@ -37,7 +37,7 @@ class CompareConfig:
     planners: tuple[str, ...] = ("ik", "rrt", "trajopt")
     variant: str = "wall"
     seed: int = 0
-    scenes: int = 2
+    scenes: int = 4
     cans: int = 3
     grasps: str = "truth"
     time_limit_s: float = 5.0
@@ -46,6 +46,7 @@ class CompareConfig:
     planner_configs: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
     executor: str = "local"
     scheduler: str | None = None
+    hard_limit_grace_s: float = HARD_LIMIT_GRACE_S
 
 
 def worker_init() -> None:
