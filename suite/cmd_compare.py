@@ -90,6 +90,9 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
         raise SuiteError(f"unknown variant {values['variant']!r}; allowed: {variants}")
     if values["executor"] not in ("local", "dask"):
         raise SuiteError(f"executor must be 'local' or 'dask', got {values['executor']!r}")
+    g = values["hard_limit_grace_s"]
+    if isinstance(g, bool) or not isinstance(g, (int, float)) or not math.isfinite(g) or g <= 0:
+        raise SuiteError(f"hard_limit_grace_s must be a finite number > 0, got {g!r}")
     if not isinstance(values["planner_configs"], dict):
         raise SuiteError("planner_configs must map planner names to settings")
     return CompareConfig(**{**values, "time_limit_s": float(t)})
@@ -131,7 +134,8 @@ def run(args: argparse.Namespace) -> int:
           f"({config.grasps} grasps)...", file=sys.stderr)
     trials = prepare_trials(config)
     counts = run_trials(trials, out=out, jobs=config.jobs, executor=config.executor,
-                        scheduler=config.scheduler, progress_bar=not args.no_progress)
+                        scheduler=config.scheduler, progress_bar=not args.no_progress,
+                        hard_limit_grace_s=config.hard_limit_grace_s)
     from suite.report import write_report
 
     table = write_report(out, plots=not args.no_plots)

@@ -176,7 +176,8 @@ def write_manifest(out: Path, config: CompareConfig, *, argv: list[str]) -> None
 
 
 def run_trials(trials: list[TrialSpec], *, out: Path, jobs: int, executor: str = "local",
-               scheduler: str | None = None, progress_bar: bool = True) -> dict[str, int]:
+               scheduler: str | None = None, progress_bar: bool = True,
+               hard_limit_grace_s: float = HARD_LIMIT_GRACE_S) -> dict[str, int]:
     """Run trials not yet recorded in out/trials.jsonl and append their records as they finish.
 
     Returns:
@@ -198,7 +199,7 @@ def run_trials(trials: list[TrialSpec], *, out: Path, jobs: int, executor: str =
         ex = DaskExecutor(scheduler=scheduler, n_workers=jobs, init=worker_init)
     else:
         raise SuiteError(f"unknown executor {executor!r}; allowed: local, dask")
-    jobs_ = [Job(t.trial_id, run_trial, t, t.problem.time_limit_s * HARD_LIMIT_FACTOR + HARD_LIMIT_GRACE_S)
+    jobs_ = [Job(t.trial_id, run_trial, t, t.problem.time_limit_s * HARD_LIMIT_FACTOR + hard_limit_grace_s)
              for t in todo]
     bar = tqdm(total=len(trials), initial=len(trials) - len(todo), desc="trials", unit="trial",
                disable=not progress_bar, file=sys.stderr, dynamic_ncols=True)
