@@ -10,6 +10,7 @@ TARGETS = {
     "collision": "suite.bench_collision",
     "perception": "perception.bench",
     "planners": "suite.bench_planners",
+    "compare": "suite.bench_compare",
 }
 
 

@@ -122,7 +122,7 @@ def prepare_out(args: argparse.Namespace) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from suite.runner import prepare_trials, run_trials, write_manifest
+    from suite.runner import make_executor, prepare_trials, run_trials, write_manifest
 
     config = resolve_config(args)
     out = prepare_out(args)
@@ -132,8 +132,16 @@ def run(args: argparse.Namespace) -> int:
         write_manifest(out, config, argv=sys.argv[1:])
     print(f"preparing {config.scenes} {config.variant} scene(s) of {config.cans} cans "
           f"({config.grasps} grasps)...", file=sys.stderr)
-    trials = prepare_trials(config)
-    counts = run_trials(trials, out=out, jobs=config.jobs, executor=config.executor,
+    executor = make_executor(config.executor, jobs=config.jobs, scheduler=config.scheduler)
+    if hasattr(executor, "start"):
+        executor.start()  # the workers import Drake and OMPL while the problems are prepared
+    try:
+        trials = prepare_trials(config)
+    except BaseException:
+        if hasattr(executor, "close"):
+            executor.close()
+        raise
+    counts = run_trials(trials, out=out, jobs=config.jobs, executor=executor,
                         scheduler=config.scheduler, progress_bar=not args.no_progress,
                         hard_limit_grace_s=config.hard_limit_grace_s)
     from suite.report import write_report

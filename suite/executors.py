@@ -29,6 +29,7 @@ class Job:
     fn: Callable[[Any], dict]
     payload: Any
     hard_limit_s: float
+    group: str = ""  # jobs of one group share cached state (e.g. a scene's worlds) in a worker
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,10 +64,11 @@ class _Worker:
         self.proc.start()
         child.close()
         self.job: Job | None = None
+        self.group: str | None = None
         self.started = 0.0
 
     def submit(self, job: Job) -> None:
-        self.job, self.started = job, time.monotonic()
+        self.job, self.group, self.started = job, job.group, time.monotonic()
         self.conn.send((job.fn, job.payload))
 
     def kill(self) -> None:
@@ -100,16 +102,50 @@ class LocalExecutor:
         self.jobs = jobs
         self.init = init
         self._ctx = mp.get_context("spawn")
+        self._workers: list[_Worker] = []
+
+    def start(self) -> None:
+        """Spawn the workers now (they import and initialise while the caller prepares work)."""
+        # One thread per worker: the pool is the parallelism; BLAS/OpenMP thread pools in every
+        # worker would only contend for the same cores. Children inherit this environment.
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(var, "1")
+        while len(self._workers) < self.jobs:
+            self._workers.append(_Worker(self._ctx, self.init))
+
+    def close(self) -> None:
+        for w in self._workers:
+            w.stop()
+        self._workers = []
+
+    @staticmethod
+    def _pick(queue: deque, w: _Worker, workers: list[_Worker]) -> Job:
+        """The next job for a free worker: one of its last group (its caches are warm), else one
+        of a group no other worker is on, else the oldest."""
+        taken = {o.group for o in workers if o is not w and o.job is not None}
+        fallback = None
+        for i, job in enumerate(queue):
+            if job.group == w.group:
+                del queue[i]
+                return job
+            if fallback is None and job.group not in taken:
+                fallback = i
+        if fallback is not None:
+            job = queue[fallback]
+            del queue[fallback]
+            return job
+        return queue.popleft()
 
     def run(self, jobs: list[Job]) -> Iterator[Outcome]:
-        """Run the jobs; yield each outcome as it completes."""
+        """Run the jobs; yield each outcome as it completes. The workers stop at the end."""
         queue = deque(jobs)
-        workers = [_Worker(self._ctx, self.init) for _ in range(min(self.jobs, len(queue)) or 0)]
+        self.start()
+        workers = self._workers
         try:
             while queue or any(w.job is not None for w in workers):
                 for w in workers:
                     if w.job is None and queue:
-                        w.submit(queue.popleft())
+                        w.submit(self._pick(queue, w, workers))
                 busy = [w for w in workers if w.job is not None]
                 now = time.monotonic()
                 timeout = max(0.0, min(w.started + w.job.hard_limit_s - now for w in busy))
@@ -140,8 +176,7 @@ class LocalExecutor:
                         yield Outcome(job, None, "killed_timeout",
                                       f"killed after {elapsed:.1f} s (hard limit {job.hard_limit_s:.1f} s)", elapsed)
         finally:
-            for w in workers:
-                w.stop()
+            self.close()
 
 
 def cpu_description() -> dict[str, Any]:

@@ -50,8 +50,18 @@ class CompareConfig:
 
 
 def worker_init() -> None:
-    """Runs once in each worker process: quiet logs, OMPL's process-global seed set once."""
+    """Runs once in each worker process: quiet logs, OMPL's process-global seed set once, and the
+    built-in planners imported up front (while the parent is still preparing problems)."""
+    import importlib
+
+    from planners.registry import BUILTIN
+
     logging.basicConfig(level=logging.WARNING)
+    for target in sorted(set(BUILTIN.values())):
+        try:
+            importlib.import_module(target.partition(":")[0])
+        except ImportError:  # reported by the trial that needs it
+            pass
     try:
         from ompl import util as ou
 
@@ -175,32 +185,42 @@ def write_manifest(out: Path, config: CompareConfig, *, argv: list[str]) -> None
     (out / MANIFEST_FILE).write_text(json.dumps(manifest, indent=2) + "\n")
 
 
-def run_trials(trials: list[TrialSpec], *, out: Path, jobs: int, executor: str = "local",
+def make_executor(executor: str, *, jobs: int, scheduler: str | None = None):
+    """The executor named on the command line ("local" or "dask")."""
+    from suite.executors import LocalExecutor
+
+    if executor == "local":
+        return LocalExecutor(jobs=jobs, init=worker_init)
+    if executor == "dask":
+        from suite.dask_executor import DaskExecutor
+
+        return DaskExecutor(scheduler=scheduler, n_workers=jobs, init=worker_init)
+    raise SuiteError(f"unknown executor {executor!r}; allowed: local, dask")
+
+
+def run_trials(trials: list[TrialSpec], *, out: Path, jobs: int, executor="local",
                scheduler: str | None = None, progress_bar: bool = True,
                hard_limit_grace_s: float = HARD_LIMIT_GRACE_S) -> dict[str, int]:
     """Run trials not yet recorded in out/trials.jsonl and append their records as they finish.
+
+    `executor` is "local", "dask", or an executor already made by `make_executor` (e.g. started
+    early so that its workers import while the problems are prepared).
 
     Returns:
         Counts: {"total", "skipped", "ran"}.
     """
     from tqdm import tqdm
 
-    from suite.executors import Job, LocalExecutor
+    from suite.executors import Job
 
     path = out / TRIALS_FILE
     done = recorded_trial_ids(path)
     todo = [t for t in trials if t.trial_id not in done]
     by_key = {t.trial_id: t for t in todo}
-    if executor == "local":
-        ex = LocalExecutor(jobs=jobs, init=worker_init)
-    elif executor == "dask":
-        from suite.dask_executor import DaskExecutor
-
-        ex = DaskExecutor(scheduler=scheduler, n_workers=jobs, init=worker_init)
-    else:
-        raise SuiteError(f"unknown executor {executor!r}; allowed: local, dask")
-    jobs_ = [Job(t.trial_id, run_trial, t, t.problem.time_limit_s * HARD_LIMIT_FACTOR + hard_limit_grace_s)
-             for t in todo]
+    ex = make_executor(executor, jobs=jobs, scheduler=scheduler) if isinstance(executor, str) else executor
+    # Trials of one scene go to the same worker where possible: its cached worlds serve them all.
+    jobs_ = [Job(t.trial_id, run_trial, t, t.problem.time_limit_s * HARD_LIMIT_FACTOR + hard_limit_grace_s,
+                 group=t.problem.scene.key()) for t in todo]
     bar = tqdm(total=len(trials), initial=len(trials) - len(todo), desc="trials", unit="trial",
                disable=not progress_bar, file=sys.stderr, dynamic_ncols=True)
     with open(path, "a") as f:
