@@ -20,7 +20,6 @@ from pydrake.geometry import (
     CollisionFilterDeclaration,
     Cylinder,
     DepthRange,
-    GeometrySet,
     MakeRenderEngineVtk,
     RenderCameraCore,
     RenderEngineVtkParams,

@@ -22,31 +22,11 @@ VALIDATE_RESOLUTION_RAD = 0.01
 
 
 def transit_problems(*, scenes: int, variant: str, time_limit_s: float, first_seed: int = 0) -> list[PlanningProblem]:
-    """The posable transit problems of `scenes` generated scenes (seeds from `first_seed` on;
-    seeds the generator cannot draw are skipped), with ground-truth grasps."""
-    from scenes.generate import generate_scene
-    from scenes.grasp_rule import truth_grasp
-    from scenes.spec import load_spec
-    from suite.problems import build_problems
+    """The posable transit problems of `scenes` generated scenes (ground-truth grasps)."""
+    from suite.problems import benchmark_cycles
 
-    spec = load_spec(variant=variant)
-    problems: list[PlanningProblem] = []
-    seed, made = first_seed, 0
-    while made < scenes:
-        if seed - first_seed > 3 * scenes + 10:
-            raise SuiteError(f"could draw only {made} of {scenes} {variant!r} scenes from seeds {first_seed}..{seed}")
-        try:
-            scene = generate_scene(spec, seed=seed)
-            built = build_problems(scene, [truth_grasp(scene, c) for c in scene.cans],
-                                   time_limit_s=time_limit_s, seed=seed)
-        except SuiteError as exc:
-            log.info("seed %d skipped: %s", seed, exc)
-            seed += 1
-            continue
-        problems += [p for p in built if p.kind == "transit" and p.pre_status is None]
-        made += 1
-        seed += 1
-    return problems
+    cycles = benchmark_cycles(scenes=scenes, variant=variant, time_limit_s=time_limit_s, first_seed=first_seed)
+    return [p for cycle in cycles for p in cycle if p.kind == "transit" and p.pre_status is None]
 
 
 def _median(values) -> float | None:

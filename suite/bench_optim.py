@@ -15,7 +15,6 @@ import time
 import numpy as np
 
 from planners.base import PlanningProblem, PlanStatus
-from suite.errors import SuiteError
 
 log = logging.getLogger(__name__)
 
@@ -25,31 +24,10 @@ BRANCH_JUMP_RAD = 2.0
 
 
 def cycles(*, scenes: int, variant: str, time_limit_s: float, first_seed: int = 0) -> list[list[PlanningProblem]]:
-    """The five problems of every can of `scenes` generated scenes (ground-truth grasps); seeds
-    the generator cannot draw are skipped."""
-    from scenes.generate import generate_scene
-    from scenes.grasp_rule import truth_grasp
-    from scenes.spec import load_spec
-    from suite.problems import build_problems
+    """The five problems of every can of `scenes` generated scenes (ground-truth grasps)."""
+    from suite.problems import benchmark_cycles
 
-    spec = load_spec(variant=variant)
-    out: list[list[PlanningProblem]] = []
-    seed, made = first_seed, 0
-    while made < scenes:
-        if seed - first_seed > 3 * scenes + 10:
-            raise SuiteError(f"could draw only {made} of {scenes} {variant!r} scenes from seeds {first_seed}..{seed}")
-        try:
-            scene = generate_scene(spec, seed=seed)
-            built = build_problems(scene, [truth_grasp(scene, c) for c in scene.cans],
-                                   time_limit_s=time_limit_s, seed=seed)
-        except SuiteError as exc:
-            log.info("seed %d skipped: %s", seed, exc)
-            seed += 1
-            continue
-        out += [built[i:i + 5] for i in range(0, len(built), 5)]
-        made += 1
-        seed += 1
-    return out
+    return benchmark_cycles(scenes=scenes, variant=variant, time_limit_s=time_limit_s, first_seed=first_seed)
 
 
 def _valid(problem: PlanningProblem, path) -> bool:

@@ -150,3 +150,34 @@ def build_problems(
             removed = removed_after
         q = q_back
     return problems
+
+
+def benchmark_cycles(
+    *, scenes: int, variant: str, time_limit_s: float, first_seed: int = 0
+) -> list[list[PlanningProblem]]:
+    """The five problems of every can of `scenes` generated scenes with ground-truth grasps, one
+    list per can (the benchmarks' workload). Seeds whose scene or problems cannot be built are
+    skipped (logged), up to 3 * scenes + 10 seeds."""
+    from scenes.generate import generate_scene
+    from scenes.grasp_rule import truth_grasp
+    from scenes.spec import load_spec
+    from suite.errors import SuiteError
+
+    spec = load_spec(variant=variant)
+    out: list[list[PlanningProblem]] = []
+    seed, made = first_seed, 0
+    while made < scenes:
+        if seed - first_seed > 3 * scenes + 10:
+            raise SuiteError(f"could draw only {made} of {scenes} {variant!r} scenes from seeds {first_seed}..{seed}")
+        try:
+            scene = generate_scene(spec, seed=seed)
+            built = build_problems(scene, [truth_grasp(scene, c) for c in scene.cans],
+                                   time_limit_s=time_limit_s, seed=seed)
+        except SuiteError as exc:
+            log.info("seed %d skipped: %s", seed, exc)
+            seed += 1
+            continue
+        out += [built[i:i + 5] for i in range(0, len(built), 5)]
+        made += 1
+        seed += 1
+    return out

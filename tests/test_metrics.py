@@ -133,7 +133,6 @@ def drake_clearances(ds, Q: np.ndarray) -> np.ndarray:
     the world body or the cans. Filtered pairs are not reported by Drake. All our shape pairs
     (box, cylinder, capsule, sphere) are supported by this query in double precision.
     """
-    from pydrake.multibody.tree import ModelInstanceIndex  # noqa: F401  (type of the instances)
 
     plant, sg = ds.plant, ds.scene_graph
     ctx = ds.diagram.CreateDefaultContext()

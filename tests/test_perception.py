@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from perception.evaluate import aggregate, axis_error_rad, match
-from perception.grasps import axis_yaw_tls, detect_cans
+from perception.grasps import axis_yaw_tls
 from perception.normals import smallest_eigenvectors
 from perception.observe import add_depth_noise
 from perception.pipeline import perceive
@@ -133,7 +133,6 @@ def test_depth_noise_robustness(seeded_results):
 
 
 def test_depth_noise_model():
-    scene, res = None, None
     from scenes.render import CameraImage
 
     img = CameraImage("t", np.zeros((200, 300, 3), np.uint8), np.full((200, 300), 0.7, np.float32), np.eye(4), np.eye(3))
