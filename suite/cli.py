@@ -20,7 +20,6 @@ COMMANDS = {
     "plan": ("suite.cmd_plan", "plan every pick-and-place motion of one scene with one planner"),
     "compare": ("suite.cmd_compare", "run the planner comparison and write results, table and plots"),
     "plot": ("suite.cmd_plot", "redraw the plots and tables of a run from its trials.jsonl"),
-    "execute": ("suite.cmd_execute", "execute a planner's plans in a physics simulation"),
     "bench": ("suite.cmd_bench", "print speed figures (collision, perception, planners)"),
 }
 
