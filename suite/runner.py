@@ -219,8 +219,11 @@ def run_trials(trials: list[TrialSpec], *, out: Path, jobs: int, executor="local
     by_key = {t.trial_id: t for t in todo}
     ex = make_executor(executor, jobs=jobs, scheduler=scheduler) if isinstance(executor, str) else executor
     # Trials of one scene go to the same worker where possible: its cached worlds serve them all.
+    # The usually long ones (transit and return, where the arm crosses the workspace) go first, so
+    # that the last trials of a run are short ones and no worker idles long at the end.
+    todo_ordered = sorted(todo, key=lambda t: t.problem.kind not in ("transit", "return"))
     jobs_ = [Job(t.trial_id, run_trial, t, t.problem.time_limit_s * HARD_LIMIT_FACTOR + hard_limit_grace_s,
-                 group=t.problem.scene.key()) for t in todo]
+                 group=t.problem.scene.key()) for t in todo_ordered]
     bar = tqdm(total=len(trials), initial=len(trials) - len(todo), desc="trials", unit="trial",
                disable=not progress_bar, file=sys.stderr, dynamic_ncols=True)
     with open(path, "a") as f:
