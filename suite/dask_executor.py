@@ -74,20 +74,12 @@ def run_in_sandbox(fn: Callable[[Any], dict], payload: Any, hard_limit_s: float,
     while True:
         ready = mp.connection.wait([w.conn, w.proc.sentinel], timeout=max(0.0, deadline - time.monotonic()))
         elapsed = time.monotonic() - w.started
-        if w.conn in ready:
-            try:
-                result = w.conn.recv()
-            except (EOFError, OSError):
-                result = None
-            if result is not None:
-                w.job = None
-                return None, result, elapsed
-        if w.proc.sentinel in ready or not w.proc.is_alive() or w.conn in ready:
-            w.proc.join(timeout=2.0)  # the pipe's EOF can arrive before the exit code
-            code = w.proc.exitcode
-            w.kill()
+        state, value = w.poll(ready)
+        if state == "done":
+            return None, value, elapsed
+        if state == "crash":
             _SANDBOXES.pop(slot, None)
-            return "crash", f"worker exited with code {code}", elapsed
+            return "crash", value, elapsed
         if elapsed >= hard_limit_s:
             w.kill()
             _SANDBOXES.pop(slot, None)

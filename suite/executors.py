@@ -71,6 +71,28 @@ class _Worker:
         self.job, self.group, self.started = job, job.group, time.monotonic()
         self.conn.send((job.fn, job.payload))
 
+    def poll(self, ready) -> tuple[str | None, Any]:
+        """The state of the running job after `multiprocessing.connection.wait` returned `ready`.
+
+        Returns:
+            ("done", result), ("crash", message) after killing the process, or (None, None) while
+            the job still runs. The caller handles the hard limit.
+        """
+        if self.conn in ready:
+            try:
+                result = self.conn.recv()
+            except (EOFError, OSError):
+                result = None
+            if result is not None:
+                self.job = None
+                return "done", result
+        if self.proc.sentinel in ready or not self.proc.is_alive() or self.conn in ready:
+            self.proc.join(timeout=2.0)  # the pipe's EOF can arrive before the exit code is set
+            code = self.proc.exitcode
+            self.kill()
+            return "crash", f"worker exited with code {code}"
+        return None, None
+
     def kill(self) -> None:
         try:
             self.proc.kill()
@@ -155,21 +177,13 @@ class LocalExecutor:
                     if w.job is None:
                         continue
                     job, elapsed = w.job, time.monotonic() - w.started
-                    if w.conn in ready:
-                        try:
-                            result = w.conn.recv()
-                        except (EOFError, OSError):
-                            result = None
-                        if result is not None:
-                            w.job = None
-                            yield Outcome(job, result, None, "", elapsed)
-                            continue
-                    if w.proc.sentinel in ready or not w.proc.is_alive():
-                        w.proc.join(timeout=1)  # the pipe can close before the exit code is set
-                        code = w.proc.exitcode
-                        w.kill()
+                    state, value = w.poll(ready)
+                    if state == "done":
+                        yield Outcome(job, value, None, "", elapsed)
+                        continue
+                    if state == "crash":
                         workers[i] = _Worker(self._ctx, self.init)
-                        yield Outcome(job, None, "crash", f"worker exited with code {code}", elapsed)
+                        yield Outcome(job, None, "crash", value, elapsed)
                     elif elapsed > job.hard_limit_s:
                         w.kill()
                         workers[i] = _Worker(self._ctx, self.init)
