@@ -47,7 +47,7 @@ from pydrake.trajectories import PiecewisePose
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
 from suite.errors import SuiteError
-from suite.worlds import collision_world, drake_plan_scene
+from suite.worlds import collision_world, drake_plan_scene, remember
 
 log = logging.getLogger(__name__)
 
@@ -179,9 +179,7 @@ class NominalIkPlanner:
         key = problem.world_key()
         prog = self._programs.get(key)
         if prog is None:
-            if len(self._programs) >= 16:
-                self._programs.pop(next(iter(self._programs)))
-            prog = self._programs[key] = _KnotProgram(drake_plan_scene(problem), self.config)
+            prog = remember(self._programs, key, _KnotProgram(drake_plan_scene(problem), self.config), max_items=16)
         return prog
 
     def _is_near(self, kind: str, t: float, t0: float, t1: float) -> bool:

@@ -29,7 +29,7 @@ from pydrake.trajectories import BsplineTrajectory
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
 from suite.errors import SuiteError
-from suite.worlds import collision_world, drake_plan_scene
+from suite.worlds import collision_world, drake_plan_scene, remember
 
 log = logging.getLogger(__name__)
 
@@ -153,9 +153,8 @@ class TrajoptPlanner:
         if hit is None:
             ds = drake_plan_scene(problem)
             context = ds.diagram.CreateDefaultContext()
-            if len(self._contexts) >= 16:
-                self._contexts.pop(next(iter(self._contexts)))
-            hit = self._contexts[key] = (ds, context, ds.plant.GetMyMutableContextFromRoot(context))
+            hit = remember(self._contexts, key, (ds, context, ds.plant.GetMyMutableContextFromRoot(context)),
+                           max_items=16)
         return hit
 
     def _via_point(self, problem: PlanningProblem, plant, plant_context, G) -> np.ndarray | None:

@@ -303,7 +303,6 @@ class CollisionWorld:
         self.parts = parts
         self._req = fcl.CollisionRequest()
         self._dreq = fcl.DistanceRequest(enable_signed_distance=True)
-        self._fixed_clearance_m = math.inf  # the smallest distance of the pairs left out
 
         # --- scene objects, with their axis-aligned boxes (exact for the static boxes) ---
         self.obstacles: list[tuple[str, fcl.CollisionObject]] = []
@@ -362,10 +361,7 @@ class CollisionWorld:
         X = self.robot.link_poses(np.zeros(7))[1] @ part.X_LS
         part.obj.setTransform(fcl.Transform(X[:3, :3], X[:3, 3]))
         d = float(fcl.distance(part.obj, obstacle, self._dreq, fcl.DistanceResult()))
-        if d <= TABLE_MARGIN_M:
-            return False
-        self._fixed_clearance_m = min(self._fixed_clearance_m, d)  # kept for reference only
-        return True
+        return d > TABLE_MARGIN_M
 
     def _build_rows(self) -> None:
         """Homogeneous rows in link frames, hand first: each part's pose columns, its spheres for

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -84,6 +85,12 @@ class Scene:
 
     def key(self) -> str:
         """A short content hash of the scene (spec and cans): identifies it across processes."""
+        return self._key
+
+    @functools.cached_property
+    def _key(self) -> str:
+        # Computed once per instance (hashing the spec's JSON costs ~2 ms); cached_property writes
+        # the instance __dict__ directly, which a frozen dataclass allows.
         blob = json.dumps({"spec": self.spec.to_dict(), "truth": self.to_json()}, sort_keys=True, default=list)
         return hashlib.sha1(blob.encode()).hexdigest()[:16]
 

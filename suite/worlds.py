@@ -13,8 +13,9 @@ _DRAKE: dict[tuple, object] = {}
 MAX_CACHED = 64
 
 
-def _remember(cache: dict, key, value):
-    if len(cache) >= MAX_CACHED:
+def remember(cache: dict, key, value, *, max_items: int = MAX_CACHED):
+    """Store `value` under `key` in a per-process cache, dropping the oldest entry when full."""
+    if len(cache) >= max_items:
         cache.pop(next(iter(cache)))
     cache[key] = value
     return value
@@ -25,7 +26,7 @@ def collision_world(problem) -> CollisionWorld:
     key = problem.world_key()
     world = _FCL.get(key)
     if world is None:
-        world = _remember(_FCL, key, CollisionWorld(
+        world = remember(_FCL, key, CollisionWorld(
             problem.scene,
             gripper_opening_m=problem.gripper_opening_m,
             held=problem.held,
@@ -42,7 +43,7 @@ def drake_plan_scene(problem):
     ds = _DRAKE.get(key)
     if ds is None:
         scene = problem.scene.without_cans(problem.removed_can_ids)
-        ds = _remember(_DRAKE, key, build_drake_scene(
+        ds = remember(_DRAKE, key, build_drake_scene(
             scene, mode="plan", cameras=False, gripper_opening_m=problem.gripper_opening_m, held=problem.held
         ))
     return ds
