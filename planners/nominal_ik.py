@@ -45,7 +45,7 @@ from pydrake.multibody.inverse_kinematics import (
 from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import PiecewisePose
 
-from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.base import PROBLEM_KINDS, PlanningProblem, PlanResult, PlanStatus, check_endpoints
 from suite.errors import SuiteError
 from suite.worlds import collision_world, drake_plan_scene, remember
 
@@ -78,6 +78,8 @@ class NominalIkConfig:
         major_iterations: SNOPT major iteration limit per knot.
         segment_check_rad: joint resolution of the python-fcl check of each step between knots.
         max_refinements: how many times a failing step may be halved.
+        knot_retries: how many other initial guesses a knot that SNOPT fails from q_prev gets
+            (the previous step continued, then uniform draws in the joint-step box).
     """
 
     knot_dt_tu: float = 0.5
@@ -94,11 +96,12 @@ class NominalIkConfig:
     major_iterations: int = 100
     segment_check_rad: float = 0.01
     max_refinements: int = 3
+    knot_retries: int = 4
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            ok = np.isfinite(v) and (v >= 0 if f.name == "max_refinements" else v > 0)
+            ok = np.isfinite(v) and (v >= 0 if f.name in ("max_refinements", "knot_retries") else v > 0)
             if not ok:
                 raise SuiteError(f"ik config {f.name}={v!r} must be a positive number")
 
@@ -165,6 +168,11 @@ def knot_times(waypoint_times: np.ndarray, dt_tu: float) -> np.ndarray:
     return np.unique(np.round(np.concatenate([grid, waypoint_times]), 9))
 
 
+def _problem_seed(problem: PlanningProblem) -> list[int]:
+    """The seed of a problem's retry draws: its `seed` and identity (kind, can)."""
+    return [int(problem.seed) & 0xFFFFFFFF, PROBLEM_KINDS.index(problem.kind), int(problem.can_id) & 0xFFFFFFFF]
+
+
 class NominalIkPlanner:
     """The paper's method: IK knot by knot along the nominal gripper trajectory."""
 
@@ -205,30 +213,43 @@ class NominalIkPlanner:
         v_max = prog.plant.GetVelocityUpperLimits()
         q_goal = np.asarray(problem.q_goal, float)
         t_end = float(times[-1])
-        counts = {"ik_solves": 0, "refinements": 0, "cost": 0.0}
+        counts = {"ik_solves": 0, "retries": 0, "refinements": 0, "cost": 0.0}
         stats: dict = {"solver": "SNOPT", "knot_dt_tu": cfg.knot_dt_tu}
+        rng = np.random.default_rng(_problem_seed(problem))
 
-        def solve_knot(t_a: float, q_a: np.ndarray, t_b: float) -> tuple[bool, np.ndarray | None, str]:
+        def solve_knot(before: tuple | None, t_a: float, q_a: np.ndarray,
+                       t_b: float) -> tuple[bool, np.ndarray | None, str]:
+            """Knot t_b from knot (t_a, q_a); `before` is the knot (t, q) before that, if any."""
             last = abs(t_b - t_end) < 1e-9
             near = last or self._is_near(problem.kind, t_b, wp_t[0], wp_t[-1])
             step = v_max * (t_b - t_a) * cfg.seconds_per_time_unit
-            ok, q, status, cost = prog.solve(
+            q_lo, q_hi = np.maximum(lower, q_a - step), np.minimum(upper, q_a + step)
+            knot = dict(
                 X_WG=RigidTransform(nominal.GetPose(t_b).GetAsMatrix4()),
                 pos_tol_m=cfg.position_tolerance_near_m if near else cfg.position_tolerance_transit_m,
                 rot_tol_rad=cfg.orientation_tolerance_near_rad if near else cfg.orientation_tolerance_transit_rad,
-                near=near,
-                q_lo=np.maximum(lower, q_a - step), q_hi=np.minimum(upper, q_a + step),
-                q_desired=q_goal if last else q_a,
-                q_guess=q_goal if last else q_a,
+                near=near, q_lo=q_lo, q_hi=q_hi, q_desired=q_goal if last else q_a,
             )
-            counts["ik_solves"] += 1
-            if ok:
-                counts["cost"] += cost
+            # SNOPT sometimes stalls from q_prev (iteration limit, "cannot be improved") where
+            # another start in the same step box converges: continue the previous step, then draw.
+            guesses = [q_goal if last else q_a]
+            if before is not None:
+                guesses.append(q_a + (q_a - before[1]) * (t_b - t_a) / (t_a - before[0]))
+            ok, q, status = False, None, ""
+            for i in range(1 + cfg.knot_retries):
+                guess = guesses[i] if i < len(guesses) else q_lo + rng.random(7) * (q_hi - q_lo)
+                ok, q, status, cost = prog.solve(q_guess=guess, **knot)
+                counts["ik_solves"] += 1
+                if ok:
+                    counts["retries"] += i
+                    counts["cost"] += cost
+                    break
             return ok, q if ok else None, status
 
-        def segment(t_a: float, q_a: np.ndarray, t_b: float, depth: int) -> list | str:
-            """Knots (t, q) after t_a up to t_b, or the reason of a failure."""
-            ok, q_b, status = solve_knot(t_a, q_a, t_b)
+        def segment(knots: list, t_b: float, depth: int) -> list | str:
+            """Knots (t, q) after the last of `knots` up to t_b, or the reason of a failure."""
+            (t_a, q_a), before = knots[-1], (knots[-2] if len(knots) > 1 else None)
+            ok, q_b, status = solve_knot(before, t_a, q_a, t_b)
             stats["solver_status"] = status
             if ok and world.motion_free(q_a, q_b, resolution_rad=cfg.segment_check_rad):
                 return [(t_b, q_b)]
@@ -236,15 +257,15 @@ class NominalIkPlanner:
                 return f"IK failed ({status})" if not ok else "step between knots collides"
             counts["refinements"] += 1
             t_m = 0.5 * (t_a + t_b)
-            left = segment(t_a, q_a, t_m, depth + 1)
+            left = segment(knots, t_m, depth + 1)
             if isinstance(left, str):
                 return left
-            right = segment(t_m, left[-1][1], t_b, depth + 1)
+            right = segment(knots + left, t_b, depth + 1)
             return right if isinstance(right, str) else left + right
 
         knots = [(float(times[0]), np.asarray(problem.q_start, float))]
         for i in range(1, len(times)):
-            out = segment(knots[-1][0], knots[-1][1], float(times[i]), 0)
+            out = segment(knots, float(times[i]), 0)
             if isinstance(out, str):
                 stats.update(counts, knots=len(knots), failed_knot=i, failed_t=float(times[i]),
                              solve_time_s=time.perf_counter() - t_start,
