@@ -17,7 +17,11 @@ Drake's distance constraint holds at the knots only; the straight joint-space st
 knots is checked with the python-fcl world (the validator's engine) at `segment_check_rad`, and a
 step that collides, or a knot that fails, is split in two at the middle time (up to
 `max_refinements` levels), so the path is refined where the nominal trajectory passes close to
-something.
+something. Before that, a knot SNOPT fails from q_prev (it stalls now and then: iteration limit,
+"current point cannot be improved") is retried from other initial guesses in the same joint-step
+box: the previous step continued, then `knot_retries` uniform draws from a generator seeded by
+the problem (seed, kind, can), so a problem's path depends on the problem alone. Retries and
+refinements stop at the problem's `time_limit_s` (status TIMEOUT).
 
 The first knot is q_start. At the last knot the cost pulls towards the shared q_goal instead of
 q_prev (the goal pose is the same; this picks q_goal's arm posture among the redundant ones),
@@ -53,6 +57,7 @@ log = logging.getLogger(__name__)
 
 #: Kinds whose whole motion is close to the can (pre-grasp -> grasp).
 _NEAR_KINDS = ("descend",)
+_OUT_OF_TIME = "time limit reached"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -216,6 +221,7 @@ class NominalIkPlanner:
         counts = {"ik_solves": 0, "retries": 0, "refinements": 0, "cost": 0.0}
         stats: dict = {"solver": "SNOPT", "knot_dt_tu": cfg.knot_dt_tu}
         rng = np.random.default_rng(_problem_seed(problem))
+        deadline = t_start + float(problem.time_limit_s)
 
         def solve_knot(before: tuple | None, t_a: float, q_a: np.ndarray,
                        t_b: float) -> tuple[bool, np.ndarray | None, str]:
@@ -237,6 +243,8 @@ class NominalIkPlanner:
                 guesses.append(q_a + (q_a - before[1]) * (t_b - t_a) / (t_a - before[0]))
             ok, q, status = False, None, ""
             for i in range(1 + cfg.knot_retries):
+                if i > 0 and time.perf_counter() > deadline:
+                    break
                 guess = guesses[i] if i < len(guesses) else q_lo + rng.random(7) * (q_hi - q_lo)
                 ok, q, status, cost = prog.solve(q_guess=guess, **knot)
                 counts["ik_solves"] += 1
@@ -253,6 +261,8 @@ class NominalIkPlanner:
             stats["solver_status"] = status
             if ok and world.motion_free(q_a, q_b, resolution_rad=cfg.segment_check_rad):
                 return [(t_b, q_b)]
+            if time.perf_counter() > deadline:
+                return _OUT_OF_TIME
             if depth >= cfg.max_refinements:
                 return f"IK failed ({status})" if not ok else "step between knots collides"
             counts["refinements"] += 1
@@ -270,7 +280,8 @@ class NominalIkPlanner:
                 stats.update(counts, knots=len(knots), failed_knot=i, failed_t=float(times[i]),
                              solve_time_s=time.perf_counter() - t_start,
                              reason=f"knot {i} (t={times[i]:g}): {out}")
-                return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
+                status = PlanStatus.TIMEOUT if out == _OUT_OF_TIME else PlanStatus.NO_SOLUTION
+                return PlanResult(status, None, stats)
             knots += out
         path = [q for _, q in knots]
         goal_dev = float(np.max(np.abs(path[-1] - q_goal)))

@@ -106,3 +106,41 @@ def test_failing_knot_is_named(cycle):
 def test_bad_config_is_a_suite_error():
     with pytest.raises(SuiteError, match="knot_dt_tu"):
         NominalIkConfig(knot_dt_tu=0.0)
+
+
+def test_same_problem_gives_the_same_path(cycle):
+    p = cycle[2]  # lift, holding the can
+    a, b = make_planner("ik").plan(p), make_planner("ik").plan(p)
+    assert a.status is PlanStatus.SUCCESS and np.array_equal(a.path, b.path)
+
+
+def test_out_of_budget_is_timeout(cycle):
+    # A knot within the first few fails (see test_failing_knot_is_named); with no budget left
+    # it gets no retries or refinements.
+    p = dataclasses.replace(cycle[3], time_limit_s=1e-6)
+    r = make_planner("ik", NominalIkConfig(seconds_per_time_unit=1e-3)).plan(p)
+    assert r.status is PlanStatus.TIMEOUT and r.path is None
+    k = r.stats["failed_knot"]
+    assert r.stats["reason"].startswith(f"knot {k} ") and r.stats["reason"].endswith(": time limit reached")
+    assert r.stats["ik_solves"] == k and r.stats["retries"] == r.stats["refinements"] == 0  # one solve a knot
+
+
+@pytest.fixture(scope="module")
+def stalling_descend():
+    """A descend of generated scene 7 (its third can, two recycled before) where SNOPT stalls
+    from q_prev at t = 9.5 (iteration limit) although the knot is feasible."""
+    from suite.problems import benchmark_cycles
+
+    cycles = benchmark_cycles(scenes=1, variant="open", time_limit_s=5.0, first_seed=7)
+    (cycle,) = [c for c in cycles if c[0].can_id == 2]
+    return cycle[1]
+
+
+def test_a_stalled_knot_is_retried_from_other_guesses(stalling_descend):
+    p = stalling_descend
+    plain = make_planner("ik", NominalIkConfig(knot_retries=0)).plan(p)
+    assert plain.status is PlanStatus.NO_SOLUTION and "IK failed" in plain.stats["reason"]
+    r = make_planner("ik").plan(p)
+    assert r.status is PlanStatus.SUCCESS and r.stats["retries"] >= 1, r.stats
+    assert collision_world(p).path_free(r.path, resolution_rad=0.01) == -1
+    assert np.array_equal(r.path[0], p.q_start) and np.array_equal(r.path[-1], p.q_goal)
