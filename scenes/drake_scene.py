@@ -2,7 +2,8 @@
 
 Two modes share one builder:
 - "sim": the cans are free bodies and the gripper fingers slide on their prismatic joints
-  (physics, rendering);
+  (physics, rendering); every arm and finger joint has an actuator with the URDF's effort limit
+  (the execution module gives them PD gains);
 - "plan": everything but the arm is fixed, so the plant's positions are exactly the 7 arm
   joints: cans welded where they stand, fingers welded at a given opening, and a held can welded
   into the gripper. IK, trajectory optimization and Drake's collision checker use this mode.
@@ -29,12 +30,12 @@ from pydrake.geometry import (
 )
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import AddMultibodyPlantSceneGraph, CoulombFriction, MultibodyPlant
+from pydrake.multibody.plant import AddMultibodyPlant, AddMultibodyPlantSceneGraph, CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import SpatialInertia, UnitInertia
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
-from scenes.robot_model import ALWAYS_TOUCHING, IIWA_URDF, WSG_URDF, load_robot
+from scenes.robot_model import ALWAYS_TOUCHING, IIWA_URDF, WSG_URDF, effort_limits, load_robot
 from scenes.scene import HeldCan, Scene
 
 RENDERER = "vtk"
@@ -95,6 +96,7 @@ def add_scene_to_plant(
     mode: str,
     gripper_opening_m: float | None = None,
     held: HeldCan | None = None,
+    couple_fingers: bool = False,
 ) -> tuple[object, object]:
     """Add robot, gripper, static world and cans to an unfinalized plant.
 
@@ -105,6 +107,8 @@ def add_scene_to_plant(
         mode: "sim" or "plan" (see the module docstring).
         gripper_opening_m: in "plan" mode, the finger opening to weld the fingers at.
         held: in "plan" mode, a can welded into the gripper (it is then not on the plate).
+        couple_fingers: in "sim" mode, tie the fingers together (left = -right) as the WSG's
+            single drive does; needs a discrete plant with Drake's SAP solver.
 
     Returns:
         The iiwa and WSG model instances.
@@ -128,6 +132,19 @@ def add_scene_to_plant(
         for name, X_GF in robot.finger_offsets(opening).items():
             plant.RemoveJoint(plant.GetJointByName(f"{name}_sliding_joint", wsg))
             plant.WeldFrames(body_frame, plant.GetFrameByName(name, wsg), RigidTransform(X_GF))
+
+    if mode == "sim":
+        efforts = effort_limits()
+        for instance in (iiwa, wsg):
+            for index in plant.GetJointIndices(instance):
+                joint = plant.get_joint(index)
+                if joint.name() in efforts:
+                    plant.AddJointActuator(f"{joint.name()}_actuator", joint, efforts[joint.name()])
+        if couple_fingers:
+            plant.AddCouplerConstraint(
+                joint0=plant.GetJointByName("left_finger_sliding_joint", wsg),
+                joint1=plant.GetJointByName("right_finger_sliding_joint", wsg),
+                gear_ratio=-1.0, offset=0.0)
 
     friction = CoulombFriction(0.9, 0.8)
     # The plate is a body of its own (welded to the world) so that the held-can-vs-plate filter
@@ -209,6 +226,8 @@ def build_drake_scene(
     held: HeldCan | None = None,
     builder: DiagramBuilder | None = None,
     build: bool = True,
+    plant_config=None,
+    couple_fingers: bool = False,
 ):
     """Build the scene's diagram.
 
@@ -220,14 +239,21 @@ def build_drake_scene(
         gripper_opening_m, held: see `add_scene_to_plant` ("plan" mode).
         builder: an existing builder to add to (then `build=False` leaves it unbuilt).
         build: build the diagram.
+        plant_config: a `MultibodyPlantConfig` (time step, contact model and approximation);
+            it replaces `time_step_s` when given.
+        couple_fingers: see `add_scene_to_plant`.
 
     Returns:
         A `DrakeScene` (its diagram is None when `build` is False).
     """
     builder = builder or DiagramBuilder()
-    plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step_s)
+    if plant_config is not None:
+        plant, scene_graph = AddMultibodyPlant(plant_config, builder)
+    else:
+        plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step_s)
     iiwa, wsg = add_scene_to_plant(
-        plant, scene_graph, scene, mode=mode, gripper_opening_m=gripper_opening_m, held=held
+        plant, scene_graph, scene, mode=mode, gripper_opening_m=gripper_opening_m, held=held,
+        couple_fingers=couple_fingers,
     )
     sensors: dict[str, RgbdSensor] = {}
     poses: dict[str, RigidTransform] = {}

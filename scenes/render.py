@@ -56,8 +56,14 @@ def render(
     if q_iiwa is not None:
         plant_context = ds.plant.GetMyMutableContextFromRoot(context)
         ds.plant.SetPositions(plant_context, ds.iiwa, np.asarray(q_iiwa, float))
+    return render_context(ds, context, cameras=names)
+
+
+def render_context(ds: DrakeScene, context, *, cameras: list[str] | None = None) -> dict[str, CameraImage]:
+    """Render the named cameras (all by default) of a built scene in the state of `context`
+    (the diagram's root context, e.g. a running simulation's)."""
     out = {}
-    for name in names:
+    for name in (list(ds.cameras) if cameras is None else cameras):
         sensor = ds.cameras[name]
         sc = sensor.GetMyContextFromRoot(context)
         rgba = sensor.color_image_output_port().Eval(sc).data

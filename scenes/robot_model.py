@@ -217,6 +217,17 @@ class RobotModel:
 
 
 @functools.lru_cache(maxsize=1)
+def effort_limits() -> dict[str, float]:
+    """Every actuated joint's effort limit (N m or N) from the iiwa and WSG model files."""
+    out = {}
+    for path in (IIWA_URDF, WSG_URDF):
+        for j in ET.parse(path).getroot().findall("joint"):
+            lim = j.find("limit")
+            if j.get("type") != "fixed" and lim is not None and lim.get("effort") is not None:
+                out[j.get("name")] = float(lim.get("effort"))
+    return out
+
+
 def load_robot() -> RobotModel:
     """Parse the project's iiwa 14 and WSG 50 model files."""
     iiwa = ET.parse(IIWA_URDF).getroot()

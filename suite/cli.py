@@ -19,6 +19,7 @@ COMMANDS = {
     "perceive": ("suite.cmd_perceive", "render the cameras and detect the cans (paper's geometric pipeline)"),
     "plan": ("suite.cmd_plan", "plan every pick-and-place motion of one scene with one planner"),
     "compare": ("suite.cmd_compare", "run the planner comparison and write results, table and plots"),
+    "execute": ("suite.cmd_execute", "plan one scene and execute the plans in physics: are the cans recycled?"),
     "plot": ("suite.cmd_plot", "redraw the plots and tables of a run from its trials.jsonl"),
     "bench": ("suite.cmd_bench", "print speed figures (collision, perception, planners)"),
 }

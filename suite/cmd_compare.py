@@ -37,6 +37,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--spec", default=None, metavar="YAML", help="scene spec file (default scenes/specs/default.yaml)")
     p.add_argument("--executor", default=None, choices=("local", "dask"), help="where trials run (default local)")
     p.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://HOST:PORT (with --executor dask)")
+    p.add_argument("--execute", action="store_true",
+                   help="execute each planner's plans in physics (Drake) and count the cans recycled")
+    p.add_argument("--reperceive", action="store_true",
+                   help="with --execute: closed loop, perceive and plan again after each pick")
     p.add_argument("--no-plots", action="store_true", help="skip drawing the plots")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -121,6 +125,19 @@ def prepare_out(args: argparse.Namespace) -> Path:
     return out
 
 
+def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, progress_bar: bool) -> None:
+    """Execute every planner's plans for every scene in physics; write execution.json."""
+    from suite.execute_runs import jobs_from_records, run_jobs, write_execution
+    from suite.records import read_trials
+
+    jobs = jobs_from_records(trials, read_trials(out / TRIALS_FILE), grasps=config.grasps,
+                             time_limit_s=config.time_limit_s, seed=config.seed, reperceive=reperceive,
+                             replay_dir=out)
+    print(f"executing {len(jobs)} plan(s) in physics ({'closed loop' if reperceive else 'open loop'})...",
+          file=sys.stderr)
+    write_execution(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar))
+
+
 def run(args: argparse.Namespace) -> int:
     from suite.runner import make_executor, prepare_trials, run_trials, write_manifest
 
@@ -144,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
     counts = run_trials(trials, out=out, jobs=config.jobs, executor=executor,
                         scheduler=config.scheduler, progress_bar=not args.no_progress,
                         hard_limit_grace_s=config.hard_limit_grace_s)
+    if args.execute or args.reperceive:
+        _execute(trials, out, config, reperceive=args.reperceive, progress_bar=not args.no_progress)
     from suite.report import write_report
 
     table = write_report(out, plots=not args.no_plots)

@@ -395,12 +395,49 @@ def plot_joint_profiles(records: Sequence[dict], *, planners: Sequence[str], kin
 # --- all of them ----------------------------------------------------------------------------------
 
 
-def make_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None) -> list[Path]:
+def plot_execution(executions: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path:
+    """Cans recycled per planner after physics execution: stacked bars of where the cans ended."""
+    planners = [p for p in planners if any(e["planner"] == p for e in executions)]
+    places = [("cans_in_bin", "in the bin", "#2e8b57"), ("cans_on_plate", "left on the plate", "#b0b0b0"),
+              ("cans_elsewhere", "dropped elsewhere", "#d62728")]
+    fig, ax = plt.subplots(figsize=(2.5 + 1.1 * len(planners), 4.4))
+    x = np.arange(len(planners))
+    bottom = np.zeros(len(planners))
+    totals = np.array([sum(e["cans_total"] for e in executions if e["planner"] == p) for p in planners], float)
+    for key, label, color in places:
+        n = np.array([sum(e.get(key, 0) for e in executions if e["planner"] == p) for p in planners], float)
+        ax.bar(x, n / np.maximum(totals, 1) * 100, bottom=bottom, color=color, label=label, width=0.6,
+               edgecolor="white", linewidth=0.5)
+        bottom += n / np.maximum(totals, 1) * 100
+    for i, p in enumerate(planners):
+        runs = [e for e in executions if e["planner"] == p]
+        k = sum(e.get("cans_in_bin", 0) for e in runs)
+        hits = sum(e.get("collisions", 0) for e in runs)
+        ax.text(i, 101.5, f"{k}/{int(totals[i])}\n{hits} collision{'s' * (hits != 1)}", ha="center",
+                va="bottom", fontsize=8)
+    ax.set_xticks(x, planners)
+    for tick, p in zip(ax.get_xticklabels(), planners):
+        tick.set_color(planner_colors(planners)[p])
+        tick.set_fontweight("bold")
+    ax.set_ylim(0, 118)
+    ax.set_ylabel("share of cans (%)")
+    ax.grid(axis="y", alpha=0.3)
+    scenes = len({(e["scene_seed"], e["variant"]) for e in executions})
+    ax.set_title(f"Cans recycled in physics ({scenes} scene{'s' * (scenes != 1)})\nlabels: cans in bin / cans, "
+                 "unintended contacts", fontsize=10)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, frameon=False, fontsize=8)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def make_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None,
+               executions: Sequence[dict] = ()) -> list[Path]:
     """Draw every figure of a run into run_dir/plots/.
 
     Args:
         run_dir: the run directory (with trials.jsonl and, optionally, manifest.json).
         records: the run's records if already read (default: read run_dir/trials.jsonl).
+        executions: the run's physics execution records (adds execution.png).
 
     Returns:
         The PNG files written.
@@ -435,5 +472,7 @@ def make_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None) ->
         p = plot_joint_profiles(records, planners=planners, kind=kind, path=out_dir / f"joint_profiles_{kind}.png")
         if p is not None:
             written.append(p)
+    if executions:
+        written.append(plot_execution(executions, planners=planners, path=out_dir / "execution.png"))
     log.info("wrote %d plots to %s", len(written), out_dir)
     return written

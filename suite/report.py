@@ -36,11 +36,18 @@ def write_report(run_dir: str | Path, *, plots: bool = True, seed: int = 0) -> s
         raise SuiteError(f"run directory {str(run_dir)!r} holds no {TRIALS_FILE}")
     records = read_trials(run_dir / TRIALS_FILE)
     planners = planners_in(records, read_manifest(run_dir))
-    written = write_summary(run_dir, records, planners=planners, seed=seed)
+    from suite.execute_runs import read_execution
+    from suite.summary import execution_table
+
+    executions = read_execution(run_dir)
+    written = write_summary(run_dir, records, planners=planners, seed=seed, executions=executions)
     written += write_arena_logs(run_dir, records=records)
     if plots:
         from suite.plots import make_plots
 
-        written += make_plots(run_dir, records=records)
+        written += make_plots(run_dir, records=records, executions=executions)
     log.debug("wrote %s", ", ".join(str(p) for p in written))
-    return summary_table(records, planners=planners)
+    table = summary_table(records, planners=planners)
+    if executions:
+        table += "\n\nExecution in physics:\n" + execution_table(executions, planners=planners, tablefmt="simple")
+    return table

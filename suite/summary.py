@@ -359,6 +359,54 @@ def _write_csv(path: Path, headers: list[str], rows: list[list[Any]]) -> None:
             w.writerow(["" if isinstance(v, float) and not math.isfinite(v) else v for v in row])
 
 
+EXECUTION_INTRO = """## Execution in physics
+
+Each planner's timed plans for every can of a scene, chained (approach, descend, close, lift,
+transit, open, return) and run in a Drake simulation with contact (see suite/execution.py).
+Cans in bin / on plate / elsewhere: where the cans ended. Execution stops at the first can whose
+cycle was not fully planned. Collisions: unintended contact episodes (robot with the scene or
+with a can it was not picking, the carried can with the scene). Peak tracking: largest joint
+error. Peak slip: largest motion of a carried can in the gripper. Clear time: median simulated
+time until the last can was in the bin. Real-time factor: simulated / wall time (median).
+"""
+
+
+def execution_table(executions: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None,
+                    tablefmt: str = "github") -> str:
+    """Per planner: where the cans ended after physics execution, contacts, tracking and time.
+
+    "fully planned" counts the scenes whose every problem was planned, and the cans recycled in
+    those scenes: the figure that judges execution apart from planning failures.
+    """
+    planners = list(planners) if planners is not None else list(dict.fromkeys(e["planner"] for e in executions))
+    headers = ["planner", "scenes", "cans in bin", "on plate", "elsewhere", "fully planned: in bin",
+               "collisions", "peak tracking (mrad)", "peak slip (mm)", "clear time (s)", "real-time factor", "errors"]
+    rows = []
+    for p in planners:
+        runs = [e for e in executions if e["planner"] == p]
+        ok = [e for e in runs if "error" not in e]
+        if not runs:
+            continue
+        total = sum(e["cans_total"] for e in runs)
+        in_bin = sum(e["cans_in_bin"] for e in ok)
+        full = [e for e in ok if not e["stopped"] and e["cans_attempted"] == e["cans_total"]]
+        full_total = sum(e["cans_total"] for e in full)
+        full_bin = sum(e["cans_in_bin"] for e in full)
+        clear = [e["clear_time_s"] for e in ok if e["clear_time_s"] is not None]
+        rows.append([
+            p, len(runs), f"{in_bin}/{total} ({100 * in_bin / max(total, 1):.0f}%)",
+            sum(e["cans_on_plate"] for e in ok), sum(e["cans_elsewhere"] for e in ok),
+            f"{full_bin}/{full_total} in {len(full)} scenes" if full else "-",
+            sum(e["collisions"] for e in ok),
+            _num(1e3 * max((e["peak_tracking_error_rad"] for e in ok), default=float("nan"))),
+            _num(1e3 * max((e.get("peak_slip_m", float("nan")) for e in ok), default=float("nan"))),
+            _num(float(np.median(clear))) if clear else "-",
+            _num(float(np.median([e["real_time_factor"] for e in ok]))) if ok else "-",
+            len(runs) - len(ok),
+        ])
+    return tabulate(rows, headers=headers, tablefmt=tablefmt)
+
+
 def write_summary(
     run_dir: str | Path,
     records: Sequence[dict[str, Any]],
@@ -366,6 +414,7 @@ def write_summary(
     planners: Sequence[str] | None = None,
     seed: int = 0,
     title: str | None = None,
+    executions: Sequence[dict[str, Any]] = (),
 ) -> list[Path]:
     """Write summary.md, summary.csv (per planner, per planner x kind, per planner x variant) and paired.csv.
 
@@ -375,6 +424,7 @@ def write_summary(
         planners: planners in display order (default: order of appearance).
         seed: seeds the bootstrap's generator, so the written CIs are reproducible.
         title: the summary's heading (default: "Run summary: <run directory name>").
+        executions: the run's physics execution records (execution.json), if it was executed.
 
     Returns:
         The written files.
@@ -383,10 +433,10 @@ def write_summary(
     planners = list(planners) if planners is not None else planners_in(records)
     pairs = paired_comparisons(records, rng=np.random.default_rng(seed), planners=planners)
     md_path, csv_path, paired_path = run_dir / "summary.md", run_dir / "summary.csv", run_dir / "paired.csv"
-    md_path.write_text(
-        summary_markdown(records, pairs=pairs, planners=planners, title=title or f"Run summary: {run_dir.name}"),
-        encoding="utf-8",
-    )
+    md = summary_markdown(records, pairs=pairs, planners=planners, title=title or f"Run summary: {run_dir.name}")
+    if executions:
+        md += "\n" + EXECUTION_INTRO + "\n" + execution_table(executions, planners=planners) + "\n"
+    md_path.write_text(md, encoding="utf-8")
     groups = [
         *summarize(records, planners=planners),
         *summarize(records, by="problem", planners=planners),
