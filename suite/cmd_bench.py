@@ -11,6 +11,7 @@ TARGETS = {
     "perception": "perception.bench",
     "planners": "suite.bench_planners",
     "compare": "suite.bench_compare",
+    "execution": "suite.bench_execution",
 }
 
 

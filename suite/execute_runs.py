@@ -33,8 +33,6 @@ from suite.execution import (
 log = logging.getLogger(__name__)
 
 EXECUTION_FILE = "execution.json"
-#: A can whose axis is within this angle of vertical stands; within it of horizontal it lies.
-UPRIGHT_TOLERANCE_RAD = math.radians(25.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,8 +106,8 @@ def _open_loop(cans: Sequence[tuple[int, tuple, str]]):
 def can_pose_from(can_id: int, X_WC: np.ndarray) -> CanPose:
     """The scene model of a can from its simulated pose (upright or lying, whichever is nearer)."""
     axis = X_WC[:3, 2]
-    lying = abs(axis[2]) < math.cos(math.pi / 4)
-    yaw = math.atan2(axis[1], axis[0]) if lying else math.atan2(X_WC[1, 0], X_WC[0, 0])
+    lying = bool(abs(axis[2]) < math.cos(math.pi / 4))
+    yaw = float(math.atan2(axis[1], axis[0]) if lying else math.atan2(X_WC[1, 0], X_WC[0, 0]))
     return CanPose(can_id, tuple(float(v) for v in X_WC[:3, 3]), lying, yaw)
 
 
@@ -118,6 +116,7 @@ def _closed_loop(job: ExecutionJob):
     can, and hand its cycle to the simulation."""
     from perception.pipeline import GRASP_CAMERA, detect_cans
     from scenes.grasp_rule import truth_grasp
+    from scenes.render import render
     from suite.problems import build_problems
 
     spec = job.scene.spec
@@ -132,7 +131,10 @@ def _closed_loop(job: ExecutionJob):
         if job.grasps == "truth":
             grasp = truth_grasp(now, cans[0])
         else:
-            detections, _ = detect_cans(world.render()[GRASP_CAMERA], spec)
+            # Before the first pick the arm has not yet moved into view (as in open loop); later
+            # frames were taken from the simulation just after the last release over the bin.
+            images = world.images if world.images is not None else render(job.scene, cameras=[GRASP_CAMERA])
+            detections, _ = detect_cans(images[GRASP_CAMERA], spec)
             if not detections:
                 return None, f"{len(cans)} can(s) left on the plate, none detected"
             grasp = detections[0].grasp

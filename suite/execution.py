@@ -183,14 +183,16 @@ class WorldState:
         q_arm: the arm's measured joint positions (7,).
         q_command: where the command stream ends (7,): the next cycle must start here.
         X_WCans: every can's pose (4, 4) by id.
-        render: renders the spec's cameras in the current state: name -> scenes.render.CameraImage.
+        images: the cameras' frames (name -> scenes.render.CameraImage) rendered from the
+            simulation right after the last release over the bin, where the arm is out of the
+            plate cameras' view; None before the first release or without cameras.
     """
 
     t_s: float
     q_arm: np.ndarray
     q_command: np.ndarray
     X_WCans: dict[int, np.ndarray]
-    render: Callable[[], dict]
+    images: dict | None
 
 
 #: Given the world between cycles, the next can's cycle, or None to stop (with a reason).
@@ -255,6 +257,7 @@ class ExecutionOutcome:
             began.
         sim_time_s: simulated time of the whole stream (settling included).
         clear_time_s: simulated time at which the last can entered the bin (None unless all did).
+        clear_wall_time_s: wall time the simulation took to get there (None unless all did).
         wall_time_s: wall time of the simulation (the provider's planning between cycles is
             left out and recorded as between_cycles_wall_s).
         real_time_factor: sim_time_s / wall_time_s.
@@ -275,6 +278,7 @@ class ExecutionOutcome:
     peak_slip_m: float
     sim_time_s: float
     clear_time_s: float | None
+    clear_wall_time_s: float | None
     wall_time_s: float
     real_time_factor: float
     cans: tuple[CanResult, ...]
@@ -431,7 +435,7 @@ def execute_cycles(
         planner: its name (recorded).
         config: control, contact and timing settings.
         meshcat: a pydrake Meshcat to record the execution into, or None.
-        cameras: add the spec's cameras so the provider can render (closed loop).
+        cameras: add the spec's cameras and render them after each release (closed loop).
         on_progress: called with (simulated time, planned total) every simulated second.
     """
     from pydrake.multibody.tree import MultibodyForces
@@ -520,6 +524,7 @@ def execute_cycles(
                for gid in inspector.GetAllGeometryIds()}
     can_bodies = {c.id: plant.GetBodyByName(f"can_{c.id}") for c in scene.cans}
     in_bin_at: dict[int, float] = {}
+    in_bin_wall: dict[int, float] = {}
     events: list[ContactEvent] = []
     touching: set[tuple[int, int]] = set()
     peak_err = 0.0
@@ -563,14 +568,15 @@ def execute_cycles(
                 p = plant.EvalBodyPoseInWorld(pc, body).translation()
                 if where(spec, p) == "bin":
                     in_bin_at[can_id] = t
+                    in_bin_wall[can_id] = time.perf_counter() - wall0 - provider_wall
+
+    snapshot: dict = {}
 
     def world_state() -> WorldState:
-        from scenes.render import render_context
-
         return WorldState(
             t_s=root.get_time(), q_arm=plant.GetPositions(pc, iiwa).copy(), q_command=stream.q_end,
             X_WCans={i: plant.EvalBodyPoseInWorld(pc, b).GetAsMatrix4() for i, b in can_bodies.items()},
-            render=lambda: render_context(ds, root),
+            images=snapshot.get("images"),
         )
 
     wall0 = time.perf_counter()
@@ -600,6 +606,13 @@ def execute_cycles(
         t = min(t + monitor_dt, stream.duration_s)
         simulator.AdvanceTo(t)
         monitor(root)
+        segment = stream.at(t)
+        if cameras and segment.phase == "return" and snapshot.get("cycle") != len(attempted):
+            from scenes.render import render_context
+
+            p0 = time.perf_counter()
+            snapshot.update(cycle=len(attempted), images=render_context(ds, root))
+            provider_wall += time.perf_counter() - p0
         if on_progress is not None and t >= next_progress:
             on_progress(t, stream.duration_s)
             next_progress += 1.0
@@ -615,12 +628,15 @@ def execute_cycles(
         cans.append(CanResult(can.id, can.id in attempted, place, tuple(float(v) for v in p),
                               in_bin_at.get(can.id) if place == "bin" else None))
     counts = {w: sum(c.where == w for c in cans) for w in ("bin", "plate", "elsewhere")}
-    clear = (max(c.in_bin_at_s for c in cans) if counts["bin"] == len(cans) and cans else None)
+    cleared = counts["bin"] == len(cans) and bool(cans)
+    clear = max(c.in_bin_at_s for c in cans) if cleared else None
+    clear_wall = max(in_bin_wall[c.can_id] for c in cans) if cleared else None
     return ExecutionOutcome(
         planner=planner, scene_seed=scene.seed, variant=scene.variant, cans_total=len(scene.cans),
         cans_attempted=len(attempted), cans_in_bin=counts["bin"], cans_on_plate=counts["plate"],
         cans_elsewhere=counts["elsewhere"], collisions=n_episodes, contact_events=tuple(events),
         peak_tracking_error_rad=peak_err, peak_slip_m=peak_slip, sim_time_s=stream.duration_s, clear_time_s=clear,
+        clear_wall_time_s=clear_wall,
         wall_time_s=wall, real_time_factor=stream.duration_s / wall if wall > 0 else float("inf"),
         cans=tuple(cans), stopped=stopped, extra={"between_cycles_wall_s": round(provider_wall, 3)},
     )

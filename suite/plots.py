@@ -398,14 +398,19 @@ def plot_joint_profiles(records: Sequence[dict], *, planners: Sequence[str], kin
 def plot_execution(executions: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path:
     """Cans recycled per planner after physics execution: stacked bars of where the cans ended."""
     planners = [p for p in planners if any(e["planner"] == p for e in executions)]
-    places = [("cans_in_bin", "in the bin", "#2e8b57"), ("cans_on_plate", "left on the plate", "#b0b0b0"),
-              ("cans_elsewhere", "dropped elsewhere", "#d62728")]
-    fig, ax = plt.subplots(figsize=(2.5 + 1.1 * len(planners), 4.4))
+    places = [  # (label, colour, which cans)
+        ("in the bin", "#2e8b57", lambda c: c["where"] == "bin"),
+        ("picked, back on the plate", "#f0a202", lambda c: c["attempted"] and c["where"] == "plate"),
+        ("dropped elsewhere", "#d62728", lambda c: c["where"] == "elsewhere"),
+        ("not attempted (plan incomplete)", "#c8c8c8", lambda c: not c["attempted"] and c["where"] == "plate"),
+    ]
+    fig, ax = plt.subplots(figsize=(3.0 + 1.1 * len(planners), 4.6))
     x = np.arange(len(planners))
     bottom = np.zeros(len(planners))
     totals = np.array([sum(e["cans_total"] for e in executions if e["planner"] == p) for p in planners], float)
-    for key, label, color in places:
-        n = np.array([sum(e.get(key, 0) for e in executions if e["planner"] == p) for p in planners], float)
+    for label, color, which in places:
+        n = np.array([sum(which(c) for e in executions if e["planner"] == p for c in e.get("cans", ()))
+                      for p in planners], float)
         ax.bar(x, n / np.maximum(totals, 1) * 100, bottom=bottom, color=color, label=label, width=0.6,
                edgecolor="white", linewidth=0.5)
         bottom += n / np.maximum(totals, 1) * 100
@@ -425,7 +430,7 @@ def plot_execution(executions: Sequence[dict], *, planners: Sequence[str], path:
     scenes = len({(e["scene_seed"], e["variant"]) for e in executions})
     ax.set_title(f"Cans recycled in physics ({scenes} scene{'s' * (scenes != 1)})\nlabels: cans in bin / cans, "
                  "unintended contacts", fontsize=10)
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, frameon=False, fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, frameon=False, fontsize=8)
     fig.tight_layout()
     return _save(fig, path)
 

@@ -363,8 +363,8 @@ EXECUTION_INTRO = """## Execution in physics
 
 Each planner's timed plans for every can of a scene, chained (approach, descend, close, lift,
 transit, open, return) and run in a Drake simulation with contact (see suite/execution.py).
-Cans in bin / on plate / elsewhere: where the cans ended. Execution stops at the first can whose
-cycle was not fully planned. Collisions: unintended contact episodes (robot with the scene or
+Cans in bin / picked but back on the plate / elsewhere: where the cans ended. Execution stops at
+the first can whose cycle was not fully planned; the cans from there on are "not attempted". Collisions: unintended contact episodes (robot with the scene or
 with a can it was not picking, the carried can with the scene). Peak tracking: largest joint
 error. Peak slip: largest motion of a carried can in the gripper. Clear time: median simulated
 time until the last can was in the bin. Real-time factor: simulated / wall time (median).
@@ -379,7 +379,8 @@ def execution_table(executions: Sequence[dict[str, Any]], *, planners: Sequence[
     those scenes: the figure that judges execution apart from planning failures.
     """
     planners = list(planners) if planners is not None else list(dict.fromkeys(e["planner"] for e in executions))
-    headers = ["planner", "scenes", "cans in bin", "on plate", "elsewhere", "fully planned: in bin",
+    headers = ["planner", "scenes", "cans in bin", "not attempted", "picked, on plate", "elsewhere",
+               "fully planned: in bin",
                "collisions", "peak tracking (mrad)", "peak slip (mm)", "clear time (s)", "real-time factor", "errors"]
     rows = []
     for p in planners:
@@ -395,7 +396,9 @@ def execution_table(executions: Sequence[dict[str, Any]], *, planners: Sequence[
         clear = [e["clear_time_s"] for e in ok if e["clear_time_s"] is not None]
         rows.append([
             p, len(runs), f"{in_bin}/{total} ({100 * in_bin / max(total, 1):.0f}%)",
-            sum(e["cans_on_plate"] for e in ok), sum(e["cans_elsewhere"] for e in ok),
+            sum(not c["attempted"] for e in ok for c in e["cans"]),
+            sum(c["attempted"] and c["where"] == "plate" for e in ok for c in e["cans"]),
+            sum(e["cans_elsewhere"] for e in ok),
             f"{full_bin}/{full_total} in {len(full)} scenes" if full else "-",
             sum(e["collisions"] for e in ok),
             _num(1e3 * max((e["peak_tracking_error_rad"] for e in ok), default=float("nan"))),

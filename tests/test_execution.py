@@ -89,3 +89,77 @@ def test_can_pose_from_a_simulated_pose():
     pose = can_pose_from(3, X)
     assert pose.lying and pose.id == 3
     assert abs(pose.axis_yaw_rad - 0.4) < 1e-9
+
+
+def _scene_with_a_moved_can():
+    """A 2-can scene and the same scene with can 1 moved 10 cm (on the plate, clear of can 0)."""
+    import dataclasses
+
+    spec = load_spec(variant="open").with_can_count(2)
+    plate_c, half = np.array(spec.plate.center_m[:2]), np.array(spec.plate.size_m[:2]) / 2 - 0.07
+    for seed in range(30):
+        believed = generate_scene(spec, seed=seed)
+        a, b = believed.cans
+        for angle in np.linspace(0, 2 * np.pi, 16, endpoint=False):
+            xy = np.array(b.p_WC_m[:2]) + 0.10 * np.array([np.cos(angle), np.sin(angle)])
+            if np.all(np.abs(xy - plate_c) <= half) and np.linalg.norm(xy - np.array(a.p_WC_m[:2])) > 0.14:
+                moved = dataclasses.replace(b, p_WC_m=(float(xy[0]), float(xy[1]), b.p_WC_m[2]))
+                return believed, dataclasses.replace(believed, cans=(a, moved))
+    raise AssertionError("no scene with room to move a can")
+
+
+def test_reperceive_picks_a_moved_can_from_where_it_really_is():
+    """The plan was made for where the can was; the can has since moved 10 cm. Open loop grasps at
+    the old place and misses it; closed loop (perceive after each pick) recycles it."""
+    from suite.execute_runs import ExecutionJob, run_execution
+
+    believed, actual = _scene_with_a_moved_can()
+    config = config_dict(make_config(planner_class("rrt"), None))
+    problems = build_problems(believed, [truth_grasp(believed, c) for c in believed.cans], time_limit_s=5.0,
+                              seed=believed.seed)
+    job = ExecutionJob("rrt", config, believed, "perceived", 5.0, believed.seed)
+    stale = execute_cycles(actual, _open_loop(plan_cans(problems, job)), q_home=problems[0].q_start,
+                           planner="rrt")
+    assert stale.cans[0].where == "bin"
+    assert stale.cans[1].where != "bin"
+
+    closed = run_execution(ExecutionJob("rrt", config, actual, "perceived", 5.0, actual.seed, reperceive=True))
+    assert closed["cans_in_bin"] == 2, closed
+
+
+def _cli(*args):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "suite", *args], capture_output=True, text=True)
+
+
+def test_execute_command_writes_the_record_and_a_self_contained_replay(tmp_path):
+    import re
+
+    out = tmp_path / "run"
+    r = _cli("execute", "--planner", "rrt", "--seed", "0", "--cans", "1", "--variant", "open", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "in bin 1/1" in r.stdout
+    (rec,) = json.loads((out / "execution.json").read_text())["executions"]
+    assert rec["planner"] == "rrt" and rec["cans_in_bin"] == 1 and rec["replay"] == "replay_rrt.html"
+    html = (out / "replay_rrt.html").read_text()
+    assert html.lstrip().startswith("<!DOCTYPE html>")
+    # Self-contained: no script or stylesheet fetched from anywhere.
+    assert not re.search(r"<script[^>]+src=", html) and not re.search(r"<link[^>]+href=\"http", html)
+    import base64
+
+    commands = [base64.b64decode(b) for b in re.findall(r'data:application/octet-binary;base64,([A-Za-z0-9+/=]+)', html)]
+    assert any(b"set_animation" in c for c in commands)  # the recorded motion, embedded
+
+
+def test_execute_command_rejects_bad_input_in_one_line(tmp_path):
+    r = _cli("execute", "--planner", "nope", "--out", str(tmp_path / "x"))
+    assert r.returncode == 2 and "nope" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = _cli("execute", "--planner", "rrt", "--cans", "-1", "--out", str(tmp_path / "x"))
+    assert r.returncode == 2 and "-1" in r.stderr
+    blocker = tmp_path / "file"
+    blocker.write_text("keep me")
+    r = _cli("execute", "--planner", "rrt", "--cans", "1", "--out", str(blocker / "sub"))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert blocker.read_text() == "keep me"
