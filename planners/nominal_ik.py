@@ -106,8 +106,10 @@ class NominalIkConfig:
     def __post_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            ok = np.isfinite(v) and (v >= 0 if f.name in ("max_refinements", "knot_retries") else v > 0)
-            if not ok:
+            if f.name in ("max_refinements", "knot_retries"):
+                if not (isinstance(v, int) and v >= 0):
+                    raise SuiteError(f"ik config {f.name}={v!r} must be a non-negative integer")
+            elif not (np.isfinite(v) and v > 0):
                 raise SuiteError(f"ik config {f.name}={v!r} must be a positive number")
 
 

@@ -106,6 +106,8 @@ def test_failing_knot_is_named(cycle):
 def test_bad_config_is_a_suite_error():
     with pytest.raises(SuiteError, match="knot_dt_tu"):
         NominalIkConfig(knot_dt_tu=0.0)
+    with pytest.raises(SuiteError, match="knot_retries=-1 must be a non-negative integer"):
+        NominalIkConfig(knot_retries=-1)
 
 
 def test_same_problem_gives_the_same_path(cycle):
