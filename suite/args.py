@@ -58,6 +58,15 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--can-color", default=None, metavar="R,G,B", help="can colour, three values in [0, 1] (default: the spec's red)")
 
 
+def add_planning_arguments(p: argparse.ArgumentParser) -> None:
+    """--planner, the scene arguments, --grasps and --time-limit-s (one scene, one planner)."""
+    p.add_argument("--planner", required=True, help="planner name (e.g. ik, rrt, trajopt)")
+    add_scene_arguments(p)
+    p.add_argument("--grasps", choices=("perceived", "truth"), default="truth",
+                   help="grasps from perception or from ground truth (default truth)")
+    p.add_argument("--time-limit-s", type=positive_float, default=5.0, help="budget per problem, seconds (default 5)")
+
+
 def parse_color(text: str) -> tuple[float, float, float, float]:
     try:
         vals = [float(v) for v in text.split(",")]

@@ -91,6 +91,7 @@ def run_bench(
     planners: tuple[str, ...] = OMPL_PLANNERS,
     rrt_time_limit_s: float = 5.0,
     optimizing_budget_s: float = 1.0,
+    first_seed: int = 0,
 ) -> dict:
     """Benchmark the OMPL planners on the transit problems of `scenes` scenes and print a table.
 
@@ -110,7 +111,7 @@ def run_bench(
         if name not in OMPL_PLANNERS:
             raise SuiteError(f"bench_ompl: unknown planner {name!r}; allowed: {', '.join(OMPL_PLANNERS)}")
     t0 = time.perf_counter()
-    problems = transit_problems(scenes=scenes, variant=variant, time_limit_s=rrt_time_limit_s)
+    problems = transit_problems(scenes=scenes, variant=variant, time_limit_s=rrt_time_limit_s, first_seed=first_seed)
     log.info("%d transit problems from %d scenes in %.1f s", len(problems), scenes, time.perf_counter() - t0)
     one_per_scene = list({p.scene.seed: p for p in reversed(problems)}.values())[::-1]
     out = {"variant": variant, "scenes": scenes, "planners": {}}

@@ -107,9 +107,9 @@ def bench_trajopt(problems: list[PlanningProblem]) -> dict:
     }
 
 
-def run_bench(*, scenes: int, variant: str, time_limit_s: float = 5.0) -> dict:
+def run_bench(*, scenes: int, variant: str, time_limit_s: float = 5.0, first_seed: int = 0) -> dict:
     """Print and return the figures of `ik` (whole cycles) and `trajopt` (transits) on one variant."""
-    all_cycles = cycles(scenes=scenes, variant=variant, time_limit_s=time_limit_s)
+    all_cycles = cycles(scenes=scenes, variant=variant, time_limit_s=time_limit_s, first_seed=first_seed)
     ik = bench_ik(all_cycles)
     print(f"[{variant}] ik: {ik['cans_solved']}/{ik['posable_cans']} posable cans solved "
           f"({ik['solved_pct']:.1f}%; {ik['cans'] - ik['posable_cans']} cans not posable, "

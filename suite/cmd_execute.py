@@ -6,20 +6,20 @@ import argparse
 import sys
 from pathlib import Path
 
-from suite.args import add_scene_arguments, positive_float, scene_from_args
+from suite.args import add_planning_arguments, positive_float, scene_from_args
 from suite.errors import SuiteError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--planner", required=True, help="planner name (e.g. ik, rrt, trajopt)")
-    add_scene_arguments(p)
-    p.add_argument("--grasps", choices=("perceived", "truth"), default="truth",
-                   help="grasps from perception or from ground truth (default truth)")
-    p.add_argument("--time-limit-s", type=positive_float, default=5.0, help="budget per problem, seconds (default 5)")
+    add_planning_arguments(p)
     p.add_argument("--reperceive", action="store_true",
                    help="closed loop: render, perceive and plan the next can after each pick")
     p.add_argument("--out", required=True, help="directory for execution.json and replay_<planner>.html")
     p.add_argument("--no-replay", action="store_true", help="do not record the Meshcat replay")
+    p.add_argument("--time-step-s", type=positive_float, default=None,
+                   help="the simulation's time step (default 0.002)")
+    p.add_argument("--contact-model", default=None,
+                   help="point or hydroelastic_with_fallback (default: hydroelastic finger pads)")
 
 
 def print_outcomes(records) -> None:
@@ -39,9 +39,19 @@ def print_outcomes(records) -> None:
 def run(args: argparse.Namespace) -> int:
     from planners.registry import planner_class
     from suite.execute_runs import ExecutionJob, run_jobs, write_execution
+    from suite.execution import CONTACT_MODELS, ExecutionConfig
     from suite.trial import config_dict, make_config
 
     cls = planner_class(args.planner)  # unknown names fail here, listing the known ones
+    overrides = {}
+    if args.time_step_s is not None:
+        if args.time_step_s > 0.01:
+            raise SuiteError(f"--time-step-s must be at most 0.01 for stable grasps, got {args.time_step_s}")
+        overrides["time_step_s"] = args.time_step_s
+    if args.contact_model is not None:
+        if args.contact_model not in CONTACT_MODELS:
+            raise SuiteError(f"unknown --contact-model {args.contact_model!r}; allowed: {', '.join(CONTACT_MODELS)}")
+        overrides["contact_model"] = args.contact_model
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -52,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
         planner=args.planner, planner_config=config_dict(make_config(cls, None)), scene=scene,
         grasps=args.grasps, time_limit_s=args.time_limit_s, seed=args.seed, reperceive=args.reperceive,
         replay_path=None if args.no_replay else str(out / f"replay_{args.planner}.html"),
+        config=ExecutionConfig(**overrides),
     )
     print(f"planning and executing {len(scene.cans)} can(s) of {scene.variant} seed {scene.seed} "
           f"with {args.planner}...", file=sys.stderr)

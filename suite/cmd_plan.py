@@ -6,15 +6,11 @@ import argparse
 import json
 import sys
 
-from suite.args import add_scene_arguments, positive_float, scene_from_args
+from suite.args import add_planning_arguments, scene_from_args
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--planner", required=True, help="planner name (e.g. ik, rrt, trajopt)")
-    add_scene_arguments(p)
-    p.add_argument("--grasps", choices=("perceived", "truth"), default="truth",
-                   help="grasps from perception or from ground truth (default truth)")
-    p.add_argument("--time-limit-s", type=positive_float, default=5.0, help="budget per problem, seconds (default 5)")
+    add_planning_arguments(p)
     p.add_argument("--json", action="store_true", help="print one JSON object with every problem's result")
 
 
@@ -22,7 +18,7 @@ def run(args: argparse.Namespace) -> int:
     from planners.registry import planner_class
     from suite.problems import build_problems
     from suite.runner import scene_grasps, worker_init
-    from suite.trial import TrialSpec, config_dict, derive_seed, make_config, run_trial, trial_id
+    from suite.trial import config_dict, make_config, run_problem
 
     cls = planner_class(args.planner)  # unknown names fail here, listing the known ones
     config = config_dict(make_config(cls, None))
@@ -32,9 +28,7 @@ def run(args: argparse.Namespace) -> int:
     problems = build_problems(scene, grasps, time_limit_s=args.time_limit_s, seed=args.seed)
     out = []
     for problem in problems:
-        p = problem.with_(seed=derive_seed(args.seed, scene.key(), problem.can_id, problem.kind, args.planner))
-        rec = run_trial(TrialSpec(trial_id(problem=p, planner=args.planner, planner_config=config),
-                                  args.planner, config, p))
+        rec = run_problem(problem, planner=args.planner, planner_config=config, run_seed=args.seed)
         out.append({k: rec[k] for k in ("can_id", "problem", "status", "planning_time_s", "path", "metrics", "stats")})
         if not args.json:
             n = len(rec["path"]) if rec["path"] else 0

@@ -21,7 +21,6 @@ import numpy as np
 from planners.base import PROBLEM_KINDS, PlanningProblem
 from scenes.scene import CanPose, Scene
 from suite.execution import (
-    CanCycle,
     ExecutionConfig,
     WorldState,
     execute_cycles,
@@ -64,22 +63,16 @@ class ExecutionJob:
     config: ExecutionConfig = ExecutionConfig()
 
 
-def _trial(problem: PlanningProblem, job: ExecutionJob) -> dict:
-    from suite.trial import TrialSpec, derive_seed, run_trial, trial_id
-
-    p = problem.with_(seed=derive_seed(job.seed, problem.scene.key(), problem.can_id, problem.kind, job.planner))
-    return run_trial(TrialSpec(trial_id(problem=p, planner=job.planner, planner_config=job.planner_config),
-                               job.planner, job.planner_config, p))
-
-
 def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob) -> list[tuple[int, tuple, str]]:
     """Plan every problem (five per can, in order): per can its paths and first failed status."""
+    from suite.trial import run_problem
+
     out = []
     for i in range(0, len(problems), len(PROBLEM_KINDS)):
         chunk = problems[i:i + len(PROBLEM_KINDS)]
         paths, failed = [], ""
         for problem in chunk:
-            rec = _trial(problem, job)
+            rec = run_problem(problem, planner=job.planner, planner_config=job.planner_config, run_seed=job.seed)
             ok = rec["status"] == "success"
             paths.append(rec["path"] if ok else None)
             if not ok and not failed:

@@ -104,6 +104,14 @@ def validate_path(problem: PlanningProblem, path: np.ndarray | None, world) -> s
     return None
 
 
+def run_problem(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int) -> dict[str, Any]:
+    """One trial in this process, seeded as `compare` seeds it (from the run seed and the
+    problem's identity)."""
+    p = problem.with_(seed=derive_seed(run_seed, problem.scene.key(), problem.can_id, problem.kind, planner))
+    return run_trial(TrialSpec(trial_id(problem=p, planner=planner, planner_config=planner_config),
+                               planner, planner_config, p))
+
+
 def run_trial(spec: TrialSpec) -> dict[str, Any]:
     """Plan, validate, time and score one trial; never raises for a planner's failure."""
     from planners.registry import planner_class
