@@ -119,7 +119,15 @@ def build_problems(
         if held is not None:
             q_lift = solve(X_plate, q_plate, opening=closed, held=held, removed=removed)
         removed_after = removed + ((truth.id,) if truth is not None else ())
-        q_bin = solve(X_bin, q_lift, opening=closed, held=held, removed=removed_after) if q_lift is not None else None
+        # The bin goal is sought from a posture at the middle waypoint, itself sought from above
+        # the plate: following the task path keeps the goal on the arm's branch (seeded straight
+        # from above the plate, over the wall the nearby seeds fail and a random restart may land
+        # on a flipped elbow or wrist that no motion along the path reaches).
+        q_bin = None
+        if q_lift is not None:
+            q_mid = solve(X_middle, q_lift, opening=closed, held=held, removed=removed_after)
+            q_bin = solve(X_bin, q_lift if q_mid is None else q_mid, opening=closed, held=held,
+                          removed=removed_after)
         q_back = q_plate
 
         def make(kind, q0, q1, X_goal, poses, *, held_=None, opening_=opening, removed_=removed):
