@@ -16,7 +16,7 @@ import numpy as np
 
 from planners.base import PlanningProblem, PlanStatus, TaskWaypoint
 from scenes.grasp_rule import Grasp, down_pose, grasp_yaw
-from scenes.ik import Q_READY, PoseIk
+from scenes.ik import Q_READY, IkOptions, PoseIk
 from scenes.scene import CanPose, HeldCan, Scene
 
 log = logging.getLogger(__name__)
@@ -37,6 +37,19 @@ def waypoint_pose(p_m) -> np.ndarray:
     """A task waypoint: the gripper pointing down, its yaw facing away from the robot base."""
     yaw = grasp_yaw(p_xy_m=p_m[:2], lying=False, axis_yaw_rad=0.0)
     return down_pose(np.asarray(p_m, float), yaw)
+
+
+#: IK options for the intermediate poses of a continuation: near seeds only.
+NEAR_ONLY = IkOptions(restarts=0)
+
+
+def between(X_a: np.ndarray, X_b: np.ndarray, n: int) -> list[np.ndarray]:
+    """n poses evenly spaced strictly between X_a and X_b (position linear, rotation slerp)."""
+    from pydrake.math import RigidTransform
+    from pydrake.trajectories import PiecewisePose
+
+    traj = PiecewisePose.MakeLinear([0.0, 1.0], [RigidTransform(X_a), RigidTransform(X_b)])
+    return [traj.GetPose(k / (n + 1)).GetAsMatrix4() for k in range(1, n + 1)]
 
 
 def match_truth(scene: Scene, grasp: Grasp) -> CanPose | None:
@@ -100,6 +113,18 @@ def build_problems(
     def solve(X, q_seed, *, opening, held=None, removed=()):
         return ik.solver(opening=opening, held=held, removed=removed).solve(X, q_seed=q_seed, rng=rng)
 
+    def solve_via(poses, q_seed, *, opening, held=None, removed=()):
+        """IK of the last pose, reached by continuation along the earlier ones: each is solved
+        from the previous solution with near seeds only (no random restarts), so the goal stays
+        on the arm's branch along the task path. An intermediate pose without a nearby solution
+        is skipped."""
+        solver = ik.solver(opening=opening, held=held, removed=removed)
+        q_ = q_seed
+        for X in poses[:-1]:
+            q_next = solver.solve(X, q_seed=q_, rng=rng, options=NEAR_ONLY)
+            q_ = q_ if q_next is None else q_next
+        return solver.solve(poses[-1], q_seed=q_, rng=rng)
+
     q_plate = solve(X_plate, Q_READY, opening=opening)
     if q_plate is None:
         from suite.errors import SuiteError
@@ -111,23 +136,22 @@ def build_problems(
         truth = match_truth(scene.without_cans(removed), grasp)
         can_id = truth.id if truth is not None else -1 - grasp.can_id
         X_start = X_plate
-        q_pre = solve(grasp.X_WGpre, q, opening=opening, removed=removed)
-        q_grasp = solve(grasp.X_WG, q_pre, opening=opening, removed=removed) if q_pre is not None else None
+        q_pre = solve_via([*between(X_start, grasp.X_WGpre, 2), grasp.X_WGpre], q, opening=opening, removed=removed)
+        q_grasp = (solve_via([*between(grasp.X_WGpre, grasp.X_WG, 2), grasp.X_WG], q_pre, opening=opening,
+                             removed=removed) if q_pre is not None else None)
         held = HeldCan.from_grasp(truth, grasp.X_WG) if truth is not None and q_grasp is not None else None
         closed = 2 * spec.can.radius_m
         q_lift = None
         if held is not None:
             q_lift = solve(X_plate, q_plate, opening=closed, held=held, removed=removed)
         removed_after = removed + ((truth.id,) if truth is not None else ())
-        # The bin goal is sought from a posture at the middle waypoint, itself sought from above
-        # the plate: following the task path keeps the goal on the arm's branch (seeded straight
-        # from above the plate, over the wall the nearby seeds fail and a random restart may land
-        # on a flipped elbow or wrist that no motion along the path reaches).
+        # Goals away from their start are reached by continuation along the task path (above the
+        # plate -> pre-grasp; above the plate -> middle -> above the bin): seeded straight from the
+        # start, the nearby seeds failed on some layouts (over the wall, at large wrist turns) and a
+        # random restart landed on a flipped elbow or wrist that no motion along the path reaches.
         q_bin = None
         if q_lift is not None:
-            q_mid = solve(X_middle, q_lift, opening=closed, held=held, removed=removed_after)
-            q_bin = solve(X_bin, q_lift if q_mid is None else q_mid, opening=closed, held=held,
-                          removed=removed_after)
+            q_bin = solve_via([X_middle, X_bin], q_lift, opening=closed, held=held, removed=removed_after)
         q_back = q_plate
 
         def make(kind, q0, q1, X_goal, poses, *, held_=None, opening_=opening, removed_=removed):
