@@ -177,7 +177,9 @@ def add_scene_to_plant(
         # that split robot from environment by model instance.
         body = plant.AddRigidBody("held_can", wsg, _can_inertia(spec))
         plant.RegisterVisualGeometry(body, RigidTransform(), can_shape, "held_can", color)
-        plant.RegisterCollisionGeometry(body, RigidTransform(), can_shape, "held_can", friction)
+        m = spec.grasp.held_margin_m  # padded as in the python-fcl world
+        padded = Cylinder(spec.can.radius_m + m, spec.can.height_m + 2 * m)
+        plant.RegisterCollisionGeometry(body, RigidTransform(), padded, "held_can", friction)
         plant.WeldFrames(plant.GetFrameByName("body", wsg), body.body_frame(), RigidTransform(held.X_GC))
         held_body = body
 

@@ -298,7 +298,8 @@ class CollisionWorld:
                 body, X_BS = robot.body_index(sh.body), sh.X_BS
             parts.append(_Part(sh.body, body, X_BS, sh.kind, sh.dims, robot.X_7G))
         if held is not None:
-            can_dims = (spec.can.radius_m, spec.can.height_m)
+            m = spec.grasp.held_margin_m
+            can_dims = (spec.can.radius_m + m, spec.can.height_m + 2 * m)
             parts.append(_Part("held_can", G_INDEX, held.X_GC, "cylinder", can_dims, robot.X_7G))
         self.parts = parts
         self._req = fcl.CollisionRequest()
@@ -689,7 +690,9 @@ class CollisionWorld:
         for a, b in zip(path[:-1], path[1:]):
             n = max(1, math.ceil(float(np.max(np.abs(b - a))) / resolution_rad))
             t = np.arange(1, n + 1)[:, None] / n
-            out.append(a + t * (b - a))
+            seg = a + t * (b - a)
+            seg[-1] = b  # exactly the waypoint (a + 1 * (b - a) may differ from b in the last bit)
+            out.append(seg)
         return np.vstack(out)
 
     def motion_free(self, q0: np.ndarray, q1: np.ndarray, *, resolution_rad: float) -> bool:

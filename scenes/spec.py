@@ -74,11 +74,13 @@ class CanGenerator:
 
 @dataclasses.dataclass(frozen=True)
 class GraspSpec:
-    """The grasp rule's offsets (metres)."""
+    """The grasp rule's offsets (metres), and the padding of a carried can in every collision
+    model (`held_margin_m`: execution leaves the planned path by a few millimetres)."""
 
     top_offset_m: float
     pregrasp_height_m: float
     open_width_m: float
+    held_margin_m: float
 
 
 @dataclasses.dataclass(frozen=True)
@@ -284,11 +286,12 @@ def parse_spec(raw: Any, *, variant: str) -> SceneSpec:
         _num(g["edge_margin_m"], "cans.edge_margin_m", nonneg=True),
         lying_p,
     )
-    gr = _section(merged, "grasp", {"top_offset_m", "pregrasp_height_m", "open_width_m"})
+    gr = _section(merged, "grasp", {"top_offset_m", "pregrasp_height_m", "open_width_m", "held_margin_m"})
     grasp = GraspSpec(
         _num(gr["top_offset_m"], "grasp.top_offset_m", nonneg=True),
         _num(gr["pregrasp_height_m"], "grasp.pregrasp_height_m", positive=True),
         _num(gr["open_width_m"], "grasp.open_width_m", positive=True),
+        _num(gr["held_margin_m"], "grasp.held_margin_m", nonneg=True),
     )
     w = _section(merged, "waypoints", {"above_plate_m", "middle_m", "above_bin_m"})
     waypoints = Waypoints(*(_vec(w[k], 3, f"waypoints.{k}") for k in ("above_plate_m", "middle_m", "above_bin_m")))  # type: ignore[arg-type]

@@ -128,18 +128,19 @@ def test_out_of_budget_is_timeout(cycle):
 
 
 @pytest.fixture(scope="module")
-def stalling_descend():
-    """A descend of generated scene 7 (its third can, two recycled before) where SNOPT stalls
-    from q_prev at t = 9.5 (iteration limit) although the knot is feasible."""
+def stalling_knot():
+    """A lift of generated scene 0 (its can 3) where SNOPT stalls from q_prev at t = 17.5
+    (kSolverSpecificError) although the knot is feasible. (Found by searching the generated
+    scenes; when the shared goals change, search again: about one cycle in five stalls.)"""
     from suite.problems import benchmark_cycles
 
-    cycles = benchmark_cycles(scenes=1, variant="open", time_limit_s=5.0, first_seed=7)
-    (cycle,) = [c for c in cycles if c[0].can_id == 2]
-    return cycle[1]
+    cycles = benchmark_cycles(scenes=1, variant="open", time_limit_s=5.0, first_seed=0)
+    (cycle,) = [c for c in cycles if c[0].can_id == 3]
+    return cycle[2]
 
 
-def test_a_stalled_knot_is_retried_from_other_guesses(stalling_descend):
-    p = stalling_descend
+def test_a_stalled_knot_is_retried_from_other_guesses(stalling_knot):
+    p = stalling_knot
     plain = make_planner("ik", NominalIkConfig(knot_retries=0)).plan(p)
     assert plain.status is PlanStatus.NO_SOLUTION and "IK failed" in plain.stats["reason"]
     r = make_planner("ik").plan(p)
