@@ -138,3 +138,21 @@ def test_existing_run_is_not_overwritten(tiny_run):
     res = compare(*TINY, "--out", str(out), check=False, timeout=60)
     assert res.returncode != 0 and "already holds a run" in res.stderr
     assert (out / "trials.jsonl").read_bytes() == before
+
+
+def test_execute_runs_each_planners_plans_in_physics(tmp_path):
+    out = tmp_path / "exec"
+    res = compare("--planners", "rrt,trajopt", "--scenes", "1", "--cans", "1", "--variant", "open",
+                  "--no-progress", "--execute", "--out", str(out))
+    execs = json.loads((out / "execution.json").read_text())["executions"]
+    assert [e["planner"] for e in execs] == ["rrt", "trajopt"]
+    recs = records(out)
+    for e in execs:
+        # Executed only what the trials planned: a planner with a failed problem stops there.
+        planned = all(r["status"] == "success" for r in recs if r["planner"] == e["planner"])
+        assert e["cans_attempted"] == (1 if planned else 0)
+        assert e["cans_in_bin"] + e["cans_on_plate"] + e["cans_elsewhere"] == e["cans_total"] == 1
+        assert e["replay"] == f"replay_{e['planner']}.html" and (out / e["replay"]).stat().st_size > 100_000
+    assert "Execution in physics" in (out / "summary.md").read_text()
+    assert (out / "plots" / "execution.png").exists()
+    assert "Execution in physics" in res.stdout
