@@ -356,12 +356,12 @@ def _finger_targets(plant, wsg, width_m: float, rate_m_s: float) -> np.ndarray:
 class _Classifier:
     """Names the plant's bodies by role: robot, finger, can_<id>, static."""
 
-    def __init__(self, plant, iiwa, wsg, scene: Scene):
+    def __init__(self, plant, iiwa, wsg):
+        from pydrake.multibody.tree import BodyIndex
+
         self.role: dict[int, str] = {}
         self.name: dict[int, str] = {}
         for i in range(plant.num_bodies()):
-            from pydrake.multibody.tree import BodyIndex
-
             body = plant.get_body(BodyIndex(i))
             self.name[i] = body.name()
             if body.model_instance() in (iiwa, wsg):
@@ -518,7 +518,7 @@ def execute_cycles(
     plant.get_actuation_input_port(wsg).FixValue(pc, np.zeros(2))
     commander_context = commander.GetMyContextFromRoot(root)
 
-    classifier = _Classifier(plant, iiwa, wsg, scene)
+    classifier = _Classifier(plant, iiwa, wsg)
     inspector = ds.scene_graph.model_inspector()
     body_of = {gid: int(plant.GetBodyFromFrameId(inspector.GetFrameId(gid)).index())
                for gid in inspector.GetAllGeometryIds()}
