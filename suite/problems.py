@@ -151,7 +151,8 @@ def build_problems(
         # random restart landed on a flipped elbow or wrist that no motion along the path reaches.
         q_bin = None
         if q_lift is not None:
-            q_bin = solve_via([X_middle, X_bin], q_lift, opening=closed, held=held, removed=removed_after)
+            via = [*between(X_plate, X_middle, 2), X_middle, *between(X_middle, X_bin, 2), X_bin]
+            q_bin = solve_via(via, q_lift, opening=closed, held=held, removed=removed_after)
         q_back = q_plate
 
         def make(kind, q0, q1, X_goal, poses, *, held_=None, opening_=opening, removed_=removed):
