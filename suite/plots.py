@@ -461,10 +461,11 @@ def make_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None,
         plot_outcomes(records, planners=planners, path=out_dir / "outcomes.png"),
         plot_time_cdf(records, planners=planners, path=out_dir / "planning_time_cdf.png"),
     ]
-    # the first scene of each variant
+    # the first scene (lowest seed) of each variant: the same file names whatever order trials finished in
     firsts: dict[str, int] = {}
     for r in records:
-        firsts.setdefault(str(r["variant"]), int(r["scene_seed"]))
+        v = str(r["variant"])
+        firsts[v] = min(firsts.get(v, int(r["scene_seed"])), int(r["scene_seed"]))
     for variant, seed in firsts.items():
         written.append(
             plot_gripper_paths(records, planners=planners, scene_seed=seed, variant=variant, manifest=manifest,
