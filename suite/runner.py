@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from suite.errors import SuiteError
-from suite.trial import TrialSpec, config_dict, derive_seed, make_config, run_trial, trial_id
+from suite.trial import TrialSpec, config_dict, make_config, make_trial, run_trial
 
 log = logging.getLogger(__name__)
 
@@ -101,10 +101,7 @@ def prepare_trials(config: CompareConfig, *, progress=None) -> list[TrialSpec]:
         problems = build_problems(scene, grasps, time_limit_s=config.time_limit_s, seed=scene_seed)
         for problem in problems:
             for name in config.planners:
-                seed = derive_seed(config.seed, scene.key(), problem.can_id, problem.kind, name)
-                p = problem.with_(seed=seed)
-                trials.append(TrialSpec(trial_id(problem=p, planner=name, planner_config=configs[name]),
-                                        name, configs[name], p))
+                trials.append(make_trial(problem, planner=name, planner_config=configs[name], run_seed=config.seed))
         if progress is not None:
             progress(scene_seed)
     return trials

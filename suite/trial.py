@@ -104,12 +104,16 @@ def validate_path(problem: PlanningProblem, path: np.ndarray | None, world) -> s
     return None
 
 
-def run_problem(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int) -> dict[str, Any]:
-    """One trial in this process, seeded as `compare` seeds it (from the run seed and the
-    problem's identity)."""
+def make_trial(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int) -> TrialSpec:
+    """The trial of a planner on a problem, its seed derived from the run seed and the problem's
+    identity (the one seeding rule of `compare`, `plan` and `execute`)."""
     p = problem.with_(seed=derive_seed(run_seed, problem.scene.key(), problem.can_id, problem.kind, planner))
-    return run_trial(TrialSpec(trial_id(problem=p, planner=planner, planner_config=planner_config),
-                               planner, planner_config, p))
+    return TrialSpec(trial_id(problem=p, planner=planner, planner_config=planner_config), planner, planner_config, p)
+
+
+def run_problem(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int) -> dict[str, Any]:
+    """One trial in this process, seeded as `compare` seeds it."""
+    return run_trial(make_trial(problem, planner=planner, planner_config=planner_config, run_seed=run_seed))
 
 
 def run_trial(spec: TrialSpec) -> dict[str, Any]:
