@@ -46,6 +46,7 @@ class ExecutionJob:
         seed: the run seed (trial seeds derive from it as in `compare`).
         cans: pre-planned cycles in picking order, (can id, five paths or None where a problem
             failed, first failed status); None to plan in this job.
+        q_home: where the pre-planned cycles start (the first approach's start); with `cans`.
         reperceive: plan each next can from a fresh rendering of the simulated cameras.
         replay_path: where to write the Meshcat replay HTML, or None.
         config: the simulation settings.
@@ -58,6 +59,7 @@ class ExecutionJob:
     time_limit_s: float
     seed: int
     cans: tuple[tuple[int, tuple[Any, ...], str], ...] | None = None
+    q_home: tuple[float, ...] | None = None
     reperceive: bool = False
     replay_path: str | None = None
     config: ExecutionConfig = ExecutionConfig()
@@ -149,20 +151,20 @@ def run_execution(job: ExecutionJob) -> dict[str, Any]:
     from suite.runner import scene_grasps
 
     scene = job.scene
-    grasps = scene_grasps(scene, grasps=job.grasps)
-    q_home = build_problems(scene, grasps[:1], time_limit_s=job.time_limit_s, seed=job.seed)[0].q_start \
-        if job.cans is None else None
+
+    def first_problems(grasps):
+        return build_problems(scene, grasps, time_limit_s=job.time_limit_s, seed=job.seed)
+
+    # The arm starts where the first approach starts (above the plate); the goal IK behind it runs
+    # once: from the problems this job plans, or from the first grasp's problems alone.
     if job.reperceive:
         provider = _closed_loop(job)
+        q_home = first_problems(scene_grasps(scene, grasps=job.grasps)[:1])[0].q_start
+    elif job.cans is None:
+        problems = first_problems(scene_grasps(scene, grasps=job.grasps))
+        provider, q_home = _open_loop(plan_cans(problems, job)), problems[0].q_start
     else:
-        if job.cans is None:
-            problems = build_problems(scene, grasps, time_limit_s=job.time_limit_s, seed=job.seed)
-            cans = plan_cans(problems, job)
-        else:
-            cans = job.cans
-        provider = _open_loop(cans)
-    if q_home is None:
-        q_home = build_problems(scene, grasps[:1], time_limit_s=job.time_limit_s, seed=job.seed)[0].q_start
+        provider, q_home = _open_loop(job.cans), np.asarray(job.q_home, float)
     meshcat = _meshcat(scene) if job.replay_path else None
     outcome = execute_cycles(scene, provider, q_home=q_home, planner=job.planner, config=job.config,
                              meshcat=meshcat, cameras=job.reperceive and job.grasps == "perceived")
@@ -220,6 +222,7 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
             planner=planner, planner_config=configs[planner], scene=scenes[scene_seed], grasps=grasps,
             time_limit_s=time_limit_s, seed=seed, reperceive=reperceive, replay_path=replay,
             cans=None if reperceive else tuple((c, tuple(p), f) for c, (p, f) in cans.items()),
+            q_home=tuple(float(v) for v in specs[0].problem.q_start),
         ))
     return jobs
 
