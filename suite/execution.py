@@ -342,15 +342,15 @@ def _make_compliant(plant, scene_graph, wsg, scene: Scene, config: ExecutionConf
                lambda p: AddRigidHydroelasticProperties(config.hydroelastic_resolution_m, p))
 
 
-def _finger_targets(plant, wsg, width_m: float, rate_m_s: float) -> np.ndarray:
-    """Desired [q, v] of the WSG's actuated joints (left inner face at -w/2, right at +w/2)."""
-    q, v = [], []
-    for index in plant.GetJointActuatorIndices(wsg):
-        name = plant.get_joint_actuator(index).joint().name()
-        sign = -1.0 if name.startswith("left") else 1.0
-        q.append(sign * width_m / 2)
-        v.append(sign * rate_m_s / 2)
-    return np.array(q + v)
+def _finger_signs(plant, wsg) -> np.ndarray:
+    """Per WSG actuator, in actuator order: -1 for the left finger (inner face at -w/2), +1 right."""
+    return np.array([-1.0 if plant.get_joint_actuator(i).joint().name().startswith("left") else 1.0
+                     for i in plant.GetJointActuatorIndices(wsg)])
+
+
+def _finger_targets(signs: np.ndarray, width_m: float, rate_m_s: float) -> np.ndarray:
+    """Desired [q, v] of the WSG's actuated joints for a finger opening and its rate."""
+    return np.concatenate([signs * width_m / 2, signs * rate_m_s / 2])
 
 
 class _Classifier:
@@ -463,6 +463,7 @@ def execute_cycles(
     plant.SetPositions(scratch, iiwa, q_home)
     _set_gains(plant, iiwa, wsg, scratch, config)
     forces = MultibodyForces(plant)
+    finger_signs = _finger_signs(plant, wsg)  # looked up once: the commander runs every step
     nv = plant.num_velocities()
 
     class Commander(LeafSystem):
@@ -487,7 +488,7 @@ def execute_cycles(
 
         def _wsg_state(self, context, output: BasicVector):
             t = context.get_time()
-            output.SetFromVector(_finger_targets(plant, wsg, *stream.at(t).width(t)))
+            output.SetFromVector(_finger_targets(finger_signs, *stream.at(t).width(t)))
 
         def _feedforward(self, context, output: BasicVector):
             q, v, a = self._arm(context.get_time())
@@ -514,9 +515,11 @@ def execute_cycles(
     root = simulator.get_mutable_context()
     pc = plant.GetMyMutableContextFromRoot(root)
     plant.SetPositions(pc, iiwa, q_home)
-    plant.SetPositions(pc, wsg, _finger_targets(plant, wsg, spec.grasp.open_width_m, 0.0)[:2])
+    plant.SetPositions(pc, wsg, _finger_targets(finger_signs, spec.grasp.open_width_m, 0.0)[:2])
     plant.get_actuation_input_port(wsg).FixValue(pc, np.zeros(2))
     commander_context = commander.GetMyContextFromRoot(root)
+    desired_port = commander.GetOutputPort("arm_desired_state")
+    contact_port = plant.get_contact_results_output_port()
 
     classifier = _Classifier(plant, iiwa, wsg)
     inspector = ds.scene_graph.model_inspector()
@@ -545,9 +548,9 @@ def execute_cycles(
             ref = grip_ref.setdefault(segment.can_id, p_GC)
             peak_slip = max(peak_slip, float(np.linalg.norm(p_GC - ref)))
         q = plant.GetPositions(pc, iiwa)
-        q_d = commander.GetOutputPort("arm_desired_state").Eval(commander_context)[:7]
+        q_d = desired_port.Eval(commander_context)[:7]
         peak_err = max(peak_err, float(np.max(np.abs(q - q_d))))
-        results = plant.get_contact_results_output_port().Eval(pc)
+        results = contact_port.Eval(pc)
         now = {}
         for i in range(results.num_point_pair_contacts()):
             info = results.point_pair_contact_info(i)
