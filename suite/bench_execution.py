@@ -2,9 +2,10 @@
 
 For each variant and grasp source, every planner plans and executes `--scenes` generated scenes
 of `--cans` cans (one job per planner and scene, planned in the job's own process). Printed per
-planner: scenes whose every problem was planned, cans in the bin among those scenes (the figure
-that judges execution), cans in the bin over all scenes, unintended contacts, and the simulation's
-real-time factor (simulated / wall time of the simulation alone; one job per core).
+planner (`suite.summary.execution_table`, as in a run's summary): cans in the bin over all scenes,
+and among the scenes whose every problem was planned (the figure that judges execution), where
+the others ended, unintended contacts, tracking, slip, and the simulation's real-time factor
+(simulated / wall time of the simulation alone; one job per core).
 """
 
 from __future__ import annotations
@@ -12,8 +13,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-
-import numpy as np
 
 from suite.args import nonneg_int, positive_int
 
@@ -64,20 +63,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"executions": records}, f, indent=1)
+    from suite.summary import execution_table
+
     for variant in variants:
         for grasps in grasp_modes:
             print(f"\n{variant}, {grasps} grasps{' (closed loop)' if args.reperceive else ''}:")
-            print(f"  {'planner':<9} {'fully planned':>13} {'in bin (fully planned)':>23} {'in bin (all)':>13} "
-                  f"{'collisions':>10} {'peak track':>10} {'RTF median':>10} {'errors':>6}")
-            for p in planners:
-                runs = [r for r in records if r["planner"] == p and r["variant"] == variant and r["grasps"] == grasps]
-                ok = [r for r in runs if "error" not in r]
-                full = [r for r in ok if not r["stopped"] and r["cans_attempted"] == r["cans_total"]]
-                fb, ft = sum(r["cans_in_bin"] for r in full), sum(r["cans_total"] for r in full)
-                ab, at = sum(r["cans_in_bin"] for r in ok), sum(r["cans_total"] for r in runs)
-                rtf = np.median([r["real_time_factor"] for r in ok]) if ok else float("nan")
-                peak = max((r["peak_tracking_error_rad"] for r in ok), default=float("nan"))
-                print(f"  {p:<9} {len(full):>6}/{len(runs):<6} {fb:>9}/{ft:<4} ({100 * fb / max(ft, 1):5.1f}%) "
-                      f"{ab:>6}/{at:<4} {sum(r['collisions'] for r in ok):>10} {peak * 1e3:>7.1f} mrad "
-                      f"{rtf:>7.2f}x {len(runs) - len(ok):>6}")
+            subset = [r for r in records if r["variant"] == variant and r["grasps"] == grasps]
+            print(execution_table(subset, planners=planners, tablefmt="simple"))
     return 0
