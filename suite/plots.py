@@ -21,7 +21,13 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Circle, Patch, Rectangle  # noqa: E402
 
 from suite.records import (  # noqa: E402
+    BACK_ON_PLATE,
+    BIN,
+    CAN_FATES,
+    ELSEWHERE,
+    NOT_ATTEMPTED,
     SUCCESS,
+    fate_counts,
     is_success,
     joint_path,
     metric_values,
@@ -398,21 +404,17 @@ def plot_joint_profiles(records: Sequence[dict], *, planners: Sequence[str], kin
 def plot_execution(executions: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path:
     """Cans recycled per planner after physics execution: stacked bars of where the cans ended."""
     planners = [p for p in planners if any(e["planner"] == p for e in executions)]
-    places = [  # (label, colour, which cans)
-        ("in the bin", "#2e8b57", lambda c: c["where"] == "bin"),
-        ("picked, back on the plate", "#f0a202", lambda c: c["attempted"] and c["where"] == "plate"),
-        ("dropped elsewhere", "#d62728", lambda c: c["where"] == "elsewhere"),
-        ("not attempted (plan incomplete)", "#c8c8c8", lambda c: not c["attempted"] and c["where"] == "plate"),
-    ]
+    colors = {BIN: "#2e8b57", BACK_ON_PLATE: "#f0a202", ELSEWHERE: "#d62728", NOT_ATTEMPTED: "#c8c8c8"}
+    labels = {ELSEWHERE: "dropped elsewhere", NOT_ATTEMPTED: "not attempted (plan incomplete)"}
     fig, ax = plt.subplots(figsize=(3.0 + 1.1 * len(planners), 4.6))
     x = np.arange(len(planners))
     bottom = np.zeros(len(planners))
     totals = np.array([sum(e["cans_total"] for e in executions if e["planner"] == p) for p in planners], float)
-    for label, color, which in places:
-        n = np.array([sum(which(c) for e in executions if e["planner"] == p for c in e.get("cans", ()))
-                      for p in planners], float)
-        ax.bar(x, n / np.maximum(totals, 1) * 100, bottom=bottom, color=color, label=label, width=0.6,
-               edgecolor="white", linewidth=0.5)
+    counts = {p: fate_counts(e for e in executions if e["planner"] == p) for p in planners}
+    for fate in CAN_FATES:
+        n = np.array([counts[p][fate] for p in planners], float)
+        ax.bar(x, n / np.maximum(totals, 1) * 100, bottom=bottom, color=colors[fate], label=labels.get(fate, fate),
+               width=0.6, edgecolor="white", linewidth=0.5)
         bottom += n / np.maximum(totals, 1) * 100
     for i, p in enumerate(planners):
         runs = [e for e in executions if e["planner"] == p]

@@ -172,3 +172,24 @@ def statuses_in(records: Iterable[dict[str, Any]]) -> list[str]:
     """The statuses present, in the order of `STATUSES` (unknown ones last, sorted)."""
     present = {str(r["status"]) for r in records}
     return [s for s in STATUSES if s in present] + sorted(present - set(STATUSES))
+
+
+#: Where a can ended after physics execution: every can of execution.json has exactly one fate.
+BIN, BACK_ON_PLATE, ELSEWHERE, NOT_ATTEMPTED = "in the bin", "picked, back on the plate", "elsewhere", "not attempted"
+CAN_FATES = (BIN, BACK_ON_PLATE, ELSEWHERE, NOT_ATTEMPTED)
+
+
+def can_fate(can: dict[str, Any]) -> str:
+    """The fate of one can record of an execution ("where" it ended and whether it was attempted)."""
+    if can["where"] in ("bin", "elsewhere"):
+        return BIN if can["where"] == "bin" else ELSEWHERE
+    return BACK_ON_PLATE if can["attempted"] else NOT_ATTEMPTED
+
+
+def fate_counts(executions: Iterable[dict[str, Any]]) -> dict[str, int]:
+    """How many cans of these executions met each fate."""
+    counts = dict.fromkeys(CAN_FATES, 0)
+    for e in executions:
+        for c in e.get("cans", ()):
+            counts[can_fate(c)] += 1
+    return counts

@@ -19,8 +19,12 @@ import numpy as np
 from tabulate import tabulate
 
 from suite.records import (
+    BACK_ON_PLATE,
+    ELSEWHERE,
+    NOT_ATTEMPTED,
     STATUSES,
     SUCCESS,
+    fate_counts,
     is_success,
     metric,
     metric_values,
@@ -394,11 +398,10 @@ def execution_table(executions: Sequence[dict[str, Any]], *, planners: Sequence[
         full_total = sum(e["cans_total"] for e in full)
         full_bin = sum(e["cans_in_bin"] for e in full)
         clear = [e["clear_time_s"] for e in ok if e["clear_time_s"] is not None]
+        fates = fate_counts(ok)
         rows.append([
             p, len(runs), f"{in_bin}/{total} ({100 * in_bin / max(total, 1):.0f}%)",
-            sum(not c["attempted"] for e in ok for c in e["cans"]),
-            sum(c["attempted"] and c["where"] == "plate" for e in ok for c in e["cans"]),
-            sum(e["cans_elsewhere"] for e in ok),
+            fates[NOT_ATTEMPTED], fates[BACK_ON_PLATE], fates[ELSEWHERE],
             f"{full_bin}/{full_total} in {len(full)} scenes" if full else "-",
             sum(e["collisions"] for e in ok),
             _num(1e3 * max((e["peak_tracking_error_rad"] for e in ok), default=float("nan"))),

@@ -197,3 +197,14 @@ def test_write_summary_files(tmp_path):
     length = next(r for r in paired if r["metric"] == "path_length_rad")
     assert length["n"] == "6" and float(length["median_diff"]) == pytest.approx(-0.35)
     assert float(length["wilcoxon_p"]) == pytest.approx(2 / 64)
+
+
+def test_every_executed_can_has_exactly_one_fate():
+    from suite.records import BACK_ON_PLATE, BIN, ELSEWHERE, NOT_ATTEMPTED, fate_counts
+
+    cans = [{"attempted": True, "where": "bin"}, {"attempted": True, "where": "plate"},
+            {"attempted": True, "where": "elsewhere"}, {"attempted": False, "where": "plate"},
+            {"attempted": False, "where": "elsewhere"}]  # knocked off the plate before its turn
+    counts = fate_counts([{"cans": cans}])
+    assert counts == {BIN: 1, BACK_ON_PLATE: 1, ELSEWHERE: 2, NOT_ATTEMPTED: 1}
+    assert sum(counts.values()) == len(cans)
