@@ -50,8 +50,8 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import PiecewisePose
 
 from planners.base import PROBLEM_KINDS, PlanningProblem, PlanResult, PlanStatus, check_endpoints
-from suite.errors import SuiteError
-from suite.worlds import collision_world, drake_plan_scene, remember
+from scenes.errors import SuiteError
+from planners.worlds import collision_world, drake_plan_scene, remember
 
 log = logging.getLogger(__name__)
 

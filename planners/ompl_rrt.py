@@ -1,7 +1,7 @@
 """OMPL sampling-based planners in joint space: `rrt` (RRT-Connect), `rrtstar`, `bitstar`, `aorrtc`, `prm`.
 
 The state space is the arm's 7 joints (RealVectorStateSpace with the joint limits). States and
-motions are checked by the problem's python-fcl world (`suite.worlds.collision_world`): a state by
+motions are checked by the problem's python-fcl world (`planners.worlds.collision_world`): a state by
 `is_free`, a straight motion by two batched `first_collision` queries over samples at most
 `resolution_rad` apart in every joint, the end state and coarse samples first so that a blocked
 motion is rejected after few exact checks. The solution is shortened by OMPL's PathSimplifier
@@ -35,8 +35,8 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
-from suite.errors import SuiteError
-from suite.worlds import collision_world
+from scenes.errors import SuiteError
+from planners.worlds import collision_world
 
 log = logging.getLogger(__name__)
 

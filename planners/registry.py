@@ -12,7 +12,7 @@ from __future__ import annotations
 import importlib
 from importlib.metadata import entry_points
 
-from suite.errors import SuiteError
+from scenes.errors import SuiteError
 
 BUILTIN = {
     "ik": "planners.nominal_ik:NominalIkPlanner",

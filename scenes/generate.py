@@ -9,7 +9,7 @@ import numpy as np
 
 from scenes.scene import CanPose, Scene
 from scenes.spec import SceneSpec
-from suite.errors import SuiteError
+from scenes.errors import SuiteError
 
 log = logging.getLogger(__name__)
 

@@ -49,7 +49,7 @@ def render(
     names = list(ds.cameras) if cameras is None else cameras
     unknown = [n for n in names if n not in ds.cameras]
     if unknown:
-        from suite.errors import SuiteError
+        from scenes.errors import SuiteError
 
         raise SuiteError(f"unknown camera {unknown[0]!r}; allowed: {sorted(ds.cameras)}")
     context = ds.diagram.CreateDefaultContext()

@@ -14,7 +14,7 @@ from typing import Any
 
 import yaml
 
-from suite.errors import SuiteError
+from scenes.errors import SuiteError
 
 DEFAULT_SPEC_PATH = Path(__file__).parent / "specs" / "default.yaml"
 

@@ -1,0 +1,1 @@
+"""Speed figures (`python -m suite bench TARGET`): medians over repeated runs, printed, never asserted."""

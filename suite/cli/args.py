@@ -1,0 +1,96 @@
+"""Command-line arguments shared by the subcommands, validated at the boundary."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from scenes.errors import SuiteError
+
+
+def positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be a positive integer")
+    return v
+
+
+def nonneg_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be an integer >= 0")
+    return v
+
+
+def positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number > 0")
+    return v
+
+
+def nonneg_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(v) or v < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number >= 0")
+    return v
+
+
+def add_scene_arguments(p: argparse.ArgumentParser) -> None:
+    """--seed, --cans, --variant, --spec, --min-gap-m, --can-color."""
+    p.add_argument("--seed", type=nonneg_int, default=0, help="scene seed (default 0)")
+    p.add_argument("--cans", type=nonneg_int, default=None, help="number of cans (default: the spec's, 5)")
+    p.add_argument("--variant", default="open", help="scene variant: open or wall (default open)")
+    p.add_argument("--spec", default=None, metavar="YAML", help="scene spec file (default: scenes/specs/default.yaml)")
+    p.add_argument("--min-gap-m", type=nonneg_float, default=None, help="minimum gap between cans (default: the spec's, 0.03)")
+    p.add_argument("--can-color", default=None, metavar="R,G,B", help="can colour, three values in [0, 1] (default: the spec's red)")
+
+
+def add_planning_arguments(p: argparse.ArgumentParser) -> None:
+    """--planner, the scene arguments, --grasps and --time-limit-s (one scene, one planner)."""
+    p.add_argument("--planner", required=True, help="planner name (e.g. ik, rrt, trajopt)")
+    add_scene_arguments(p)
+    p.add_argument("--grasps", choices=("perceived", "truth"), default="truth",
+                   help="grasps from perception or from ground truth (default truth)")
+    p.add_argument("--time-limit-s", type=positive_float, default=5.0, help="budget per problem, seconds (default 5)")
+
+
+def parse_color(text: str) -> tuple[float, float, float, float]:
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) != 3 or any(not 0 <= v <= 1 for v in vals):
+        raise SuiteError(f"--can-color must be three numbers in [0, 1] like 0.1,0.3,0.9, got {text!r}")
+    return (vals[0], vals[1], vals[2], 1.0)
+
+
+def spec_from_args(args: argparse.Namespace):
+    from scenes.spec import load_spec
+
+    spec = load_spec(args.spec, variant=args.variant)
+    if args.cans is not None:
+        spec = spec.with_can_count(args.cans)
+    if args.min_gap_m is not None:
+        spec = spec.with_min_gap(args.min_gap_m)
+    if args.can_color is not None:
+        spec = spec.with_can_color(parse_color(args.can_color))
+    return spec
+
+
+def scene_from_args(args: argparse.Namespace):
+    from scenes.generate import generate_scene
+
+    return generate_scene(spec_from_args(args), seed=args.seed)

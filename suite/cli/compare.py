@@ -1,0 +1,172 @@
+"""`python -m suite compare`: run every planner on every problem, then table, plots and exports."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime as dt
+import math
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+from suite.cli.args import nonneg_int, positive_float, positive_int
+from scenes.errors import SuiteError
+from suite.run.runner import TRIALS_FILE, CompareConfig
+
+RESULTS_DIR = Path("results")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    d = CompareConfig()
+    p.add_argument("--planners", default=None, help=f"comma-separated planner names (default {','.join(d.planners)})")
+    p.add_argument("--variant", default=None, help=f"scene variant: open or wall (default {d.variant})")
+    p.add_argument("--seed", type=nonneg_int, default=None, help=f"first scene seed and run seed (default {d.seed})")
+    p.add_argument("--scenes", type=positive_int, default=None, help=f"number of scenes (default {d.scenes})")
+    p.add_argument("--cans", type=positive_int, default=None, help=f"cans per scene (default {d.cans})")
+    p.add_argument("--grasps", choices=("perceived", "truth"), default=None,
+                   help=f"grasps from perception or from ground truth (default {d.grasps})")
+    p.add_argument("--time-limit-s", type=positive_float, default=None,
+                   help=f"planning budget per problem, seconds (default {d.time_limit_s})")
+    p.add_argument("--jobs", type=positive_int, default=None, help=f"worker processes (default {d.jobs})")
+    p.add_argument("--out", default=None, help="run directory (default results/<UTC timestamp>)")
+    p.add_argument("--resume", action="store_true", help="continue the run in --out, skipping recorded trials")
+    p.add_argument("--config", default=None, metavar="YAML", help="settings from a YAML file (flags override it)")
+    p.add_argument("--spec", default=None, metavar="YAML", help="scene spec file (default scenes/specs/default.yaml)")
+    p.add_argument("--executor", default=None, choices=("local", "dask"), help="where trials run (default local)")
+    p.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://HOST:PORT (with --executor dask)")
+    p.add_argument("--execute", action="store_true",
+                   help="execute each planner's plans in physics (Drake) and count the cans recycled")
+    p.add_argument("--reperceive", action="store_true",
+                   help="with --execute: closed loop, perceive and plan again after each pick")
+    p.add_argument("--no-plots", action="store_true", help="skip drawing the plots")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _config_file(path: str) -> dict:
+    try:
+        raw = yaml.safe_load(Path(path).read_text())
+    except OSError as exc:
+        raise SuiteError(f"cannot read --config {path!r}: {exc.strerror}") from None
+    except yaml.YAMLError:
+        raise SuiteError(f"--config {path!r} is not valid YAML") from None
+    raw = raw or {}
+    if not isinstance(raw, dict):
+        raise SuiteError(f"--config {path!r} must be a YAML mapping of settings")
+    fields = {f.name for f in dataclasses.fields(CompareConfig)}
+    unknown = set(raw) - fields
+    if unknown:
+        raise SuiteError(f"--config: unknown setting {sorted(unknown)[0]!r}; allowed: {sorted(fields)}")
+    return raw
+
+
+def resolve_config(args: argparse.Namespace) -> CompareConfig:
+    """Defaults < --config file < flags; every value checked before any trial runs."""
+    from planners.registry import parse_planner_list
+    from scenes.spec import available_variants
+
+    values = dataclasses.asdict(CompareConfig())
+    if args.config:
+        values.update(_config_file(args.config))
+    for key in ("variant", "seed", "scenes", "cans", "grasps", "time_limit_s", "jobs", "spec", "executor", "scheduler"):
+        v = getattr(args, key)
+        if v is not None:
+            values[key] = v
+    planners = args.planners if args.planners is not None else values["planners"]
+    if isinstance(planners, (list, tuple)):
+        planners = ",".join(str(p) for p in planners)
+    values["planners"] = tuple(parse_planner_list(str(planners)))
+    for key in ("scenes", "cans", "jobs"):
+        v = values[key]
+        if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
+            raise SuiteError(f"{key} must be a positive integer, got {v!r}")
+    if isinstance(values["seed"], bool) or not isinstance(values["seed"], int) or values["seed"] < 0:
+        raise SuiteError(f"seed must be an integer >= 0, got {values['seed']!r}")
+    t = values["time_limit_s"]
+    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t <= 0:
+        raise SuiteError(f"time_limit_s must be a finite number > 0, got {t!r}")
+    if values["grasps"] not in ("perceived", "truth"):
+        raise SuiteError(f"grasps must be 'perceived' or 'truth', got {values['grasps']!r}")
+    variants = available_variants(values["spec"])
+    if values["variant"] not in variants:
+        raise SuiteError(f"unknown variant {values['variant']!r}; allowed: {variants}")
+    if values["executor"] not in ("local", "dask"):
+        raise SuiteError(f"executor must be 'local' or 'dask', got {values['executor']!r}")
+    g = values["hard_limit_grace_s"]
+    if isinstance(g, bool) or not isinstance(g, (int, float)) or not math.isfinite(g) or g <= 0:
+        raise SuiteError(f"hard_limit_grace_s must be a finite number > 0, got {g!r}")
+    if not isinstance(values["planner_configs"], dict):
+        raise SuiteError("planner_configs must map planner names to settings")
+    return CompareConfig(**{**values, "time_limit_s": float(t)})
+
+
+def prepare_out(args: argparse.Namespace) -> Path:
+    """The run directory, created and checked writable; with --resume it must hold a run."""
+    if args.resume:
+        if not args.out:
+            raise SuiteError("--resume needs --out naming the interrupted run's directory")
+        out = Path(args.out)
+        if not (out / TRIALS_FILE).exists():
+            raise SuiteError(f"--resume: {str(out)!r} holds no {TRIALS_FILE} to resume")
+    else:
+        stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+        out = Path(args.out) if args.out else RESULTS_DIR / stamp
+        if (out / TRIALS_FILE).exists():
+            raise SuiteError(f"--out {str(out)!r} already holds a run; use --resume to continue it or another --out")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise SuiteError(f"--out {str(out)!r} is not writable: {exc.strerror}") from None
+    return out
+
+
+def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, progress_bar: bool) -> None:
+    """Execute every planner's plans for every scene in physics; write execution.json."""
+    from suite.execution.jobs import jobs_from_records, run_jobs, write_execution
+    from suite.run.records import read_trials
+
+    jobs = jobs_from_records(trials, read_trials(out / TRIALS_FILE), grasps=config.grasps,
+                             time_limit_s=config.time_limit_s, seed=config.seed, reperceive=reperceive,
+                             replay_dir=out)
+    print(f"executing {len(jobs)} plan(s) in physics ({'closed loop' if reperceive else 'open loop'})...",
+          file=sys.stderr)
+    write_execution(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar))
+
+
+def run(args: argparse.Namespace) -> int:
+    from suite.run.runner import make_executor, prepare_trials, run_trials, write_manifest
+
+    config = resolve_config(args)
+    out = prepare_out(args)
+    t0 = time.perf_counter()
+    print(f"run directory: {out}", file=sys.stderr)
+    if not args.resume:
+        write_manifest(out, config, argv=sys.argv[1:])
+    print(f"preparing {config.scenes} {config.variant} scene(s) of {config.cans} cans "
+          f"({config.grasps} grasps)...", file=sys.stderr)
+    executor = make_executor(config.executor, jobs=config.jobs, scheduler=config.scheduler)
+    if hasattr(executor, "start"):
+        executor.start()  # the workers import Drake and OMPL while the problems are prepared
+    try:
+        trials = prepare_trials(config)
+    except BaseException:
+        if hasattr(executor, "close"):
+            executor.close()
+        raise
+    counts = run_trials(trials, out=out, jobs=config.jobs, executor=executor,
+                        scheduler=config.scheduler, progress_bar=not args.no_progress,
+                        hard_limit_grace_s=config.hard_limit_grace_s)
+    if args.execute or args.reperceive:
+        _execute(trials, out, config, reperceive=args.reperceive, progress_bar=not args.no_progress)
+    from suite.report.write import write_report
+
+    table = write_report(out, plots=not args.no_plots)
+    print(table)
+    print(f"\n{counts['ran']} trials run, {counts['skipped']} already recorded; "
+          f"{time.perf_counter() - t0:.1f} s wall; results in {out}", file=sys.stderr)
+    return 0

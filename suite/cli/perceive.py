@@ -1,0 +1,136 @@
+"""`python -m suite perceive`: render the cameras and detect the cans (the paper's Section III)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+
+import numpy as np
+
+from suite.cli.args import add_scene_arguments, nonneg_float, positive_int, scene_from_args, spec_from_args
+
+log = logging.getLogger(__name__)
+
+NOISE_STREAM = 7919  # the depth noise's generator is seeded with (scene seed, this)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_scene_arguments(p)
+    p.add_argument("--json", action="store_true", help="print the detections (and evaluation) as JSON")
+    p.add_argument("--images", metavar="DIR", help="write debug images (crops, masks, components, normals, grasps) to DIR")
+    p.add_argument("--evaluate", action="store_true", help="match detections to the ground truth and print accuracy")
+    p.add_argument("--scenes", type=positive_int, default=1,
+                   help="with --evaluate: evaluate N scenes from seed on (seeds the generator cannot draw are "
+                        "skipped and named) and print the aggregate (default 1)")
+    p.add_argument("--depth-noise-m", type=nonneg_float, default=0.0,
+                   help="Gaussian depth noise sigma in metres, with 1%% of depth pixels dropped (default 0)")
+    p.add_argument("--segmentation", choices=("color", "geometric"), default="color",
+                   help="color: the paper's HSV rule (default); geometric: colour-free RANSAC plane removal")
+
+
+def _noise_rng(seed: int) -> np.random.Generator:
+    return np.random.default_rng([seed, NOISE_STREAM])
+
+
+def _params(args: argparse.Namespace):
+    from perception.grasps import PerceptionParams
+
+    return PerceptionParams(segmentation=args.segmentation)
+
+
+def run(args: argparse.Namespace) -> int:
+    from perception.evaluate import aggregate, match
+    from perception.pipeline import GRASP_CAMERA, perceive
+    from scenes.errors import SuiteError
+
+    if args.scenes > 1 and not args.evaluate:
+        raise SuiteError(f"--scenes {args.scenes} needs --evaluate (several scenes are only evaluated)")
+    if args.scenes > 1 and args.images:
+        raise SuiteError("--images writes one scene's images; use it without --scenes")
+    if args.scenes > 1:
+        return _run_many(args)
+
+    scene = scene_from_args(args)
+    spec = scene.spec
+    res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(scene.seed), all_cameras=bool(args.images),
+                   params=_params(args))
+    out: dict = {
+        "detections": [d.to_json() for d in res.detections],
+        "timing_s": {"render": round(res.render_time_s, 4), "process": round(res.process_time_s, 4)},
+    }
+    acc = None
+    if args.evaluate:
+        m = match(res.detections, scene.cans, gate_m=spec.can.radius_m, radius_m=spec.can.radius_m, height_m=spec.can.height_m)
+        acc = aggregate([m])
+        out["evaluation"] = acc.to_json()
+    if args.images:
+        from perception.debug_images import write_debug_images
+
+        write_debug_images(args.images, frames=res.frames, detections=res.detections, spec=spec,
+                           grasp_camera=GRASP_CAMERA, truth=scene.cans)
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    print(f"scene seed {scene.seed}, variant {scene.variant}: {len(res.detections)} cans detected "
+          f"(render {1e3 * res.render_time_s:.0f} ms, process {1e3 * res.process_time_s:.1f} ms)")
+    for d in res.detections:
+        x, y, z = d.p_WC_m
+        kind = f"lying, axis yaw {d.axis_yaw_rad:+.3f} rad" if d.lying else "upright"
+        gx, gy, gz = d.grasp.X_WG[:3, 3]
+        print(f"  can {d.id}: {kind:28s} centre ({x:+.4f}, {y:+.4f}, {z:.4f}) m, grasp at ({gx:+.4f}, {gy:+.4f}, {gz:.4f}) m, {d.n_points} points")
+    if acc is not None:
+        for line in acc.lines():
+            print("  " + line)
+    if args.images:
+        print(f"debug images written to {args.images}")
+    return 0
+
+
+def _run_many(args: argparse.Namespace) -> int:
+    """Evaluate `--scenes` scenes from `--seed` on and print the aggregate figures.
+
+    A detection matches a can when their centres are within the can radius in xy.
+    """
+    from perception.evaluate import aggregate, match
+    from perception.pipeline import perceive
+    from scenes.generate import generate_scene
+    from scenes.errors import SuiteError
+
+    spec = spec_from_args(args)
+    matches, proc_s, render_s, skipped = [], [], [], []
+    seed = args.seed - 1
+    while len(matches) < args.scenes:
+        seed += 1
+        if len(skipped) > args.scenes:
+            raise SuiteError(f"the generator could not draw {len(skipped)} of the scenes from seed {args.seed}; "
+                             "try fewer cans or a smaller --min-gap-m")
+        try:
+            scene = generate_scene(spec, seed=seed)
+        except SuiteError as exc:  # the generator cannot draw this seed's scene: not perception's failure
+            log.warning("seed %d skipped: %s", seed, exc)
+            skipped.append(seed)
+            continue
+        res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(seed), params=_params(args))
+        m = match(res.detections, scene.cans, gate_m=spec.can.radius_m, radius_m=spec.can.radius_m, height_m=spec.can.height_m)
+        matches.append(m)
+        proc_s.append(res.process_time_s)
+        render_s.append(res.render_time_s)
+        missed = m.n_truth - len(m.pairs)
+        extra = m.n_detected - len(m.pairs)
+        if missed or extra or not all(m.kind_correct):
+            log.info("seed %d: %d missed, %d extra, %d lying/upright wrong", seed, missed, extra,
+                     sum(not k for k in m.kind_correct))
+    acc = aggregate(matches)
+    timing = {"render_median": round(float(np.median(render_s)), 4), "process_median": round(float(np.median(proc_s)), 4)}
+    if args.json:
+        print(json.dumps({"variant": spec.variant, "seeds": [args.seed, seed],
+                          "depth_noise_m": args.depth_noise_m, "segmentation": args.segmentation, "skipped_seeds": skipped, "evaluation": acc.to_json(), "timing_s": timing}))
+        return 0
+    print(f"variant {spec.variant}, seeds {args.seed}..{seed}, "
+          f"depth noise {args.depth_noise_m} m, {args.segmentation} segmentation" + (f", skipped seeds (no scene) {skipped}" if skipped else ""))
+    for line in acc.lines():
+        print("  " + line)
+    print(f"  median time per scene: render {1e3 * timing['render_median']:.0f} ms, "
+          f"process {1e3 * timing['process_median']:.1f} ms")
+    return 0

@@ -1,0 +1,1 @@
+"""Physics execution: timed plans run in a Drake simulation with contact; are the cans recycled?"""

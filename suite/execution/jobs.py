@@ -1,0 +1,293 @@
+"""Physics execution jobs: which plans are executed, in which process, and where results go.
+
+One job = one planner on one scene. Its plans come from a comparison run's records (open loop),
+are planned in the job's own process before execution (open loop), or are planned can by can
+between cycles from what the simulation's cameras see (`reperceive`, closed loop). Every path
+executed passed the same validation and TOPP-RA timing as in a comparison trial.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import math
+import sys
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from planners.base import PROBLEM_KINDS, PlanningProblem
+from scenes.scene import CanPose, Scene
+from suite.execution.simulate import (
+    ExecutionConfig,
+    WorldState,
+    execute_cycles,
+    planned_ahead,
+    timed_cycle,
+    where,
+)
+
+log = logging.getLogger(__name__)
+
+EXECUTION_FILE = "execution.json"
+
+
+@dataclasses.dataclass(frozen=True)
+class ExecutionJob:
+    """One planner's execution of one scene (picklable plain values).
+
+    Attributes:
+        planner, planner_config: the planner and its settings.
+        scene: the scene at the start.
+        grasps: "truth" or "perceived".
+        time_limit_s: planning budget per problem (when this job plans).
+        seed: the run seed (trial seeds derive from it as in `compare`).
+        cans: pre-planned cycles in picking order, (can id, five paths or None where a problem
+            failed, first failed status); None to plan in this job.
+        q_home: where the pre-planned cycles start (the first approach's start); with `cans`.
+        reperceive: plan each next can from a fresh rendering of the simulated cameras.
+        replay_path: where to write the Meshcat replay HTML, or None.
+        config: the simulation settings.
+    """
+
+    planner: str
+    planner_config: dict[str, Any]
+    scene: Scene
+    grasps: str
+    time_limit_s: float
+    seed: int
+    cans: tuple[tuple[int, tuple[Any, ...], str], ...] | None = None
+    q_home: tuple[float, ...] | None = None
+    reperceive: bool = False
+    replay_path: str | None = None
+    config: ExecutionConfig = ExecutionConfig()
+
+
+def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob) -> list[tuple[int, tuple, str]]:
+    """Plan every problem (five per can, in order): per can its paths and first failed status."""
+    from suite.run.trial import run_problem
+
+    out = []
+    for i in range(0, len(problems), len(PROBLEM_KINDS)):
+        chunk = problems[i:i + len(PROBLEM_KINDS)]
+        paths, failed = [], ""
+        for problem in chunk:
+            rec = run_problem(problem, planner=job.planner, planner_config=job.planner_config, run_seed=job.seed)
+            ok = rec["status"] == "success"
+            paths.append(rec["path"] if ok else None)
+            if not ok and not failed:
+                failed = f"{problem.kind} {rec['status']}"
+        out.append((chunk[0].can_id, tuple(paths), failed))
+    return out
+
+
+def _open_loop(cans: Sequence[tuple[int, tuple, str]]):
+    """Cycles in order up to the first can not fully planned (later plans assumed it gone)."""
+    cycles, stopped = [], ""
+    for can_id, paths, failed in cans:
+        if failed or any(p is None for p in paths):
+            stopped = f"can {can_id}: {failed or 'not planned'}"
+            break
+        cycle = timed_cycle(can_id, paths)
+        if cycle is None:
+            stopped = f"can {can_id}: timing failed"
+            break
+        cycles.append(cycle)
+    return planned_ahead(cycles, stopped)
+
+
+def can_pose_from(can_id: int, X_WC: np.ndarray) -> CanPose:
+    """The scene model of a can from its simulated pose (upright or lying, whichever is nearer)."""
+    axis = X_WC[:3, 2]
+    lying = bool(abs(axis[2]) < math.cos(math.pi / 4))
+    yaw = float(math.atan2(axis[1], axis[0]) if lying else math.atan2(X_WC[1, 0], X_WC[0, 0]))
+    return CanPose(can_id, tuple(float(v) for v in X_WC[:3, 3]), lying, yaw)
+
+
+def _closed_loop(job: ExecutionJob):
+    """Between cycles: look again, rebuild the scene from where the cans now are, plan the next
+    can, and hand its cycle to the simulation."""
+    from perception.pipeline import GRASP_CAMERA, detect_cans
+    from scenes.grasp_rule import truth_grasp
+    from scenes.render import render
+    from suite.problems.cycle import build_problems
+
+    spec = job.scene.spec
+    tried: set[int] = set()
+
+    def provide(world: WorldState):
+        cans = [can_pose_from(i, X) for i, X in sorted(world.X_WCans.items())
+                if where(spec, X[:3, 3]) == "plate" and i not in tried]
+        if not cans:
+            return None, ""
+        now = Scene(spec, job.scene.seed, tuple(cans))
+        if job.grasps == "truth":
+            grasp = truth_grasp(now, cans[0])
+        else:
+            # Before the first pick the arm has not yet moved into view (as in open loop); later
+            # frames were taken from the simulation just after the last release over the bin.
+            images = world.images if world.images is not None else render(job.scene, cameras=[GRASP_CAMERA])
+            detections, _ = detect_cans(images[GRASP_CAMERA], spec)
+            if not detections:
+                return None, f"{len(cans)} can(s) left on the plate, none detected"
+            grasp = detections[0].grasp
+        problems = build_problems(now, [grasp], time_limit_s=job.time_limit_s, seed=job.seed,
+                                  q_home=world.q_command)
+        (can_id, paths, failed), = plan_cans(problems, job)
+        tried.add(can_id)
+        if failed:
+            return None, f"can {can_id}: {failed}"
+        cycle = timed_cycle(can_id, paths)
+        return (cycle, "") if cycle is not None else (None, f"can {can_id}: timing failed")
+
+    return provide
+
+
+def run_execution(job: ExecutionJob) -> dict[str, Any]:
+    """Plan if needed, execute in physics, write the replay; the outcome as a JSON record."""
+    from suite.problems.cycle import build_problems
+    from suite.run.runner import scene_grasps
+
+    scene = job.scene
+
+    def first_problems(grasps):
+        return build_problems(scene, grasps, time_limit_s=job.time_limit_s, seed=job.seed)
+
+    # The arm starts where the first approach starts (above the plate); the goal IK behind it runs
+    # once: from the problems this job plans, or from the first grasp's problems alone.
+    if job.reperceive:
+        provider = _closed_loop(job)
+        q_home = first_problems(scene_grasps(scene, grasps=job.grasps)[:1])[0].q_start
+    elif job.cans is None:
+        problems = first_problems(scene_grasps(scene, grasps=job.grasps))
+        provider, q_home = _open_loop(plan_cans(problems, job)), problems[0].q_start
+    else:
+        provider, q_home = _open_loop(job.cans), np.asarray(job.q_home, float)
+    meshcat = _meshcat(scene) if job.replay_path else None
+    outcome = execute_cycles(scene, provider, q_home=q_home, planner=job.planner, config=job.config,
+                             meshcat=meshcat, cameras=job.reperceive and job.grasps == "perceived")
+    record = outcome.to_json()
+    record.update(grasps=job.grasps, reperceive=job.reperceive, config=dataclasses.asdict(job.config))
+    if meshcat is not None:
+        Path(job.replay_path).write_text(meshcat.StaticHtml(), encoding="utf-8")
+        record["replay"] = Path(job.replay_path).name
+    return record
+
+
+def _meshcat(scene: Scene):
+    from pydrake.geometry import Meshcat
+
+    logging.getLogger("drake").setLevel(logging.WARNING)  # "Meshcat listening..." is not news here
+    meshcat = Meshcat()
+    # Look at the work area (plate, wall, bin) from the front right, a little above the arm.
+    spec = scene.spec
+    target = (np.array([*spec.plate.center_m[:2], 0.1]) + np.array([*spec.bin.center_xy_m, 0.1])) / 2
+    meshcat.SetCameraPose(target + np.array([1.3, -0.9, 0.8]), target)
+    return meshcat
+
+
+def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str, time_limit_s: float,
+                      seed: int, reperceive: bool, replay_dir: Path | None) -> list[ExecutionJob]:
+    """One job per planner and scene of a comparison run, its plans taken from the trial records.
+
+    Args:
+        trials: the run's TrialSpecs in problem order (this gives each scene's picking order).
+        records: the run's trial records (paths of the successful, validated trials).
+        replay_dir: where to write replay_<planner>.html for each planner's first scene, or None.
+    """
+    by_id = {r["trial_id"]: r for r in records}
+    groups: dict[tuple[str, int], list] = {}
+    scenes: dict[int, Scene] = {}
+    configs: dict[str, dict] = {}
+    for t in trials:
+        groups.setdefault((t.planner, t.problem.scene.seed), []).append(t)
+        scenes[t.problem.scene.seed] = t.problem.scene
+        configs[t.planner] = t.planner_config
+    jobs, replayed = [], set()
+    for (planner, scene_seed), specs in groups.items():
+        cans: dict[int, list] = {}
+        for t in specs:
+            rec = by_id.get(t.trial_id)
+            status = rec["status"] if rec else "not run"
+            entry = cans.setdefault(t.problem.can_id, [[], ""])
+            entry[0].append(rec["path"] if status == "success" else None)
+            if status != "success" and not entry[1]:
+                entry[1] = f"{t.problem.kind} {status}"
+        replay = None
+        if replay_dir is not None and planner not in replayed:
+            replay, _ = str(Path(replay_dir) / f"replay_{planner}.html"), replayed.add(planner)
+        jobs.append(ExecutionJob(
+            planner=planner, planner_config=configs[planner], scene=scenes[scene_seed], grasps=grasps,
+            time_limit_s=time_limit_s, seed=seed, reperceive=reperceive, replay_path=replay,
+            cans=None if reperceive else tuple((c, tuple(p), f) for c, (p, f) in cans.items()),
+            q_home=tuple(float(v) for v in specs[0].problem.q_start),
+        ))
+    return jobs
+
+
+def write_execution(out: Path, records: Sequence[dict[str, Any]]) -> Path:
+    """Write the run's execution.json (atomically: a torn write never replaces a good file)."""
+    path = Path(out) / EXECUTION_FILE
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps({"executions": list(records)}, indent=1), encoding="utf-8")
+    tmp.replace(path)
+    return path
+
+
+def read_execution(run_dir: str | Path) -> list[dict[str, Any]]:
+    """The execution records of a run ([] when it was not executed)."""
+    path = Path(run_dir) / EXECUTION_FILE
+    if not path.exists():
+        return []
+    return json.loads(path.read_text(encoding="utf-8"))["executions"]
+
+
+def run_jobs(jobs: Sequence[ExecutionJob], *, workers: int, progress_bar: bool = True) -> list[dict[str, Any]]:
+    """Run execution jobs in `workers` spawned processes; records in the jobs' order."""
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    from tqdm import tqdm
+
+    from suite.run.runner import worker_init
+
+    results: list[dict[str, Any] | None] = [None] * len(jobs)
+    bar = tqdm(total=len(jobs), desc="execution", unit="run", disable=not progress_bar,
+               file=sys.stderr, dynamic_ncols=True)
+    if workers <= 1 or len(jobs) <= 1:
+        worker_init()
+        for i, job in enumerate(jobs):
+            results[i] = _guarded(job)
+            bar.update(1)
+    else:
+        with cf.ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("spawn"),
+                                    initializer=worker_init) as pool:
+            futures = {pool.submit(_guarded, job): i for i, job in enumerate(jobs)}
+            for fut in cf.as_completed(futures):
+                i = futures[fut]
+                try:
+                    results[i] = fut.result()
+                except Exception as exc:  # the worker process died
+                    results[i] = _failed(jobs[i], f"{type(exc).__name__}: {exc}")
+                rec = results[i]
+                bar.set_postfix_str(f"{rec['planner']} seed {rec['scene_seed']}: "
+                                    f"{rec.get('cans_in_bin', 0)}/{rec['cans_total']} in bin", refresh=False)
+                bar.update(1)
+    bar.close()
+    return [r for r in results if r is not None]
+
+
+def _guarded(job: ExecutionJob) -> dict[str, Any]:
+    try:
+        return run_execution(job)
+    except Exception as exc:  # one failed simulation is that run's error, not the whole run's
+        log.debug("execution of %s on seed %d failed", job.planner, job.scene.seed, exc_info=True)
+        return _failed(job, f"{type(exc).__name__}: {exc}")
+
+
+def _failed(job: ExecutionJob, message: str) -> dict[str, Any]:
+    return {"planner": job.planner, "scene_seed": job.scene.seed, "variant": job.scene.variant,
+            "cans_total": len(job.scene.cans), "error": message, "grasps": job.grasps,
+            "reperceive": job.reperceive}

@@ -1,0 +1,216 @@
+"""The paper's pick-and-place cycle as named planning problems, with shared goal configurations.
+
+For each can, in the order given: approach (above the plate -> pre-grasp, gripper open),
+descend (pre-grasp -> grasp), lift (grasp -> above the plate, holding the can), transit (above
+the plate -> above the bin, holding the can; over the wall in the `wall` variant), return (above
+the bin -> above the plate, gripper open). Goal configurations are computed once here by a
+collision-aware IK with a deterministic seed, so every planner gets the same goals.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+
+from planners.base import PlanningProblem, PlanStatus, TaskWaypoint
+from scenes.grasp_rule import Grasp, down_pose, grasp_yaw
+from scenes.ik import Q_READY, IkOptions, PoseIk
+from scenes.scene import CanPose, HeldCan, Scene
+
+log = logging.getLogger(__name__)
+
+#: The paper's schedule (time units) of one 45-unit cycle: segment start/end of each motion.
+#: approach [0, 5), descend [5, 10), close [10, 13), lift [13, 18), plate -> middle [18, 24),
+#: middle -> bin [24, 30), open [30, 33), bin -> middle [33, 39), middle -> plate [39, 45).
+SCHEDULE = {
+    "approach": (0.0, 5.0),
+    "descend": (5.0, 10.0),
+    "lift": (13.0, 18.0),
+    "transit": (18.0, 30.0),
+    "return": (33.0, 45.0),
+}
+
+
+def waypoint_pose(p_m) -> np.ndarray:
+    """A task waypoint: the gripper pointing down, its yaw facing away from the robot base."""
+    yaw = grasp_yaw(p_xy_m=p_m[:2], lying=False, axis_yaw_rad=0.0)
+    return down_pose(np.asarray(p_m, float), yaw)
+
+
+#: IK options for the intermediate poses of a continuation: near seeds only.
+NEAR_ONLY = IkOptions(restarts=0)
+
+
+def between(X_a: np.ndarray, X_b: np.ndarray, n: int) -> list[np.ndarray]:
+    """n poses evenly spaced strictly between X_a and X_b (position linear, rotation slerp)."""
+    from pydrake.math import RigidTransform
+    from pydrake.trajectories import PiecewisePose
+
+    traj = PiecewisePose.MakeLinear([0.0, 1.0], [RigidTransform(X_a), RigidTransform(X_b)])
+    return [traj.GetPose(k / (n + 1)).GetAsMatrix4() for k in range(1, n + 1)]
+
+
+def match_truth(scene: Scene, grasp: Grasp) -> CanPose | None:
+    """The ground-truth can a grasp closes on: the nearest can in xy within one can radius."""
+    p = grasp.X_WG[:2, 3]
+    best = min(scene.cans, key=lambda c: float(np.hypot(*(np.asarray(c.p_WC_m[:2]) - p))), default=None)
+    if best is None or np.hypot(*(np.asarray(best.p_WC_m[:2]) - p)) > scene.spec.can.radius_m:
+        return None
+    return best
+
+
+@dataclasses.dataclass
+class _IkCache:
+    """Plan-mode scenes and IK solvers keyed by world (opening, held can, removed cans)."""
+
+    scene: Scene
+    solvers: dict = dataclasses.field(default_factory=dict)
+
+    def solver(self, *, opening: float, held: HeldCan | None, removed: tuple[int, ...]) -> PoseIk:
+        from scenes.drake_scene import build_drake_scene
+
+        key = (round(opening, 9), None if held is None else held.can.id, removed)
+        if key not in self.solvers:
+            ds = build_drake_scene(
+                self.scene.without_cans(removed), mode="plan", cameras=False,
+                gripper_opening_m=opening, held=held,
+            )
+            self.solvers[key] = PoseIk(ds)
+        return self.solvers[key]
+
+
+def build_problems(
+    scene: Scene,
+    grasps: list[Grasp],
+    *,
+    time_limit_s: float,
+    seed: int,
+    q_home: np.ndarray | None = None,
+) -> list[PlanningProblem]:
+    """The named problems of the whole task, five per grasp, in execution order.
+
+    Args:
+        scene: the scene (ground truth for collision).
+        grasps: one grasp per can to pick, in picking order (perceived or from ground truth).
+        time_limit_s: each problem's planning budget.
+        seed: the seed of the goal IK restarts (deterministic); also the problems' base seed.
+        q_home: the arm's configuration before the first cycle (default: IK above the plate).
+
+    Returns:
+        Problems whose start or goal could not be solved carry pre_status IK_FAILED (q_goal None,
+        or q_start NaN); they are reported, not dropped. The next cycle starts above the plate.
+    """
+    spec = scene.spec
+    wp = spec.waypoints
+    X_plate, X_middle, X_bin = (waypoint_pose(p) for p in (wp.above_plate_m, wp.middle_m, wp.above_bin_m))
+    ik = _IkCache(scene)
+    opening = spec.grasp.open_width_m
+    removed: tuple[int, ...] = ()
+    rng = np.random.default_rng([seed, 7919])
+
+    def solve(X, q_seed, *, opening, held=None, removed=()):
+        return ik.solver(opening=opening, held=held, removed=removed).solve(X, q_seed=q_seed, rng=rng)
+
+    def solve_via(poses, q_seed, *, opening, held=None, removed=()):
+        """IK of the last pose, reached by continuation along the earlier ones: each is solved
+        from the previous solution with near seeds only (no random restarts), so the goal stays
+        on the arm's branch along the task path. An intermediate pose without a nearby solution
+        is skipped."""
+        solver = ik.solver(opening=opening, held=held, removed=removed)
+        q_ = q_seed
+        for X in poses[:-1]:
+            q_next = solver.solve(X, q_seed=q_, rng=rng, options=NEAR_ONLY)
+            q_ = q_ if q_next is None else q_next
+        return solver.solve(poses[-1], q_seed=q_, rng=rng)
+
+    q_plate = solve(X_plate, Q_READY, opening=opening)
+    if q_plate is None:
+        from scenes.errors import SuiteError
+
+        raise SuiteError("no collision-free IK solution for the 'above the plate' waypoint of this scene")
+    q = q_plate if q_home is None else np.asarray(q_home, float)
+    problems: list[PlanningProblem] = []
+    for grasp in grasps:
+        truth = match_truth(scene.without_cans(removed), grasp)
+        can_id = truth.id if truth is not None else -1 - grasp.can_id
+        X_start = X_plate
+        q_pre = solve_via([*between(X_start, grasp.X_WGpre, 2), grasp.X_WGpre], q, opening=opening, removed=removed)
+        q_grasp = (solve_via([*between(grasp.X_WGpre, grasp.X_WG, 2), grasp.X_WG], q_pre, opening=opening,
+                             removed=removed) if q_pre is not None else None)
+        held = HeldCan.from_grasp(truth, grasp.X_WG) if truth is not None and q_grasp is not None else None
+        closed = 2 * spec.can.radius_m
+        q_lift = None
+        if held is not None:
+            q_lift = solve(X_plate, q_plate, opening=closed, held=held, removed=removed)
+        removed_after = removed + ((truth.id,) if truth is not None else ())
+        # Goals away from their start are reached by continuation along the task path (above the
+        # plate -> pre-grasp; above the plate -> middle -> above the bin): seeded straight from the
+        # start, the nearby seeds failed on some layouts (over the wall, at large wrist turns) and a
+        # random restart landed on a flipped elbow or wrist that no motion along the path reaches.
+        q_bin = None
+        if q_lift is not None:
+            via = [*between(X_plate, X_middle, 2), X_middle, *between(X_middle, X_bin, 2), X_bin]
+            q_bin = solve_via(via, q_lift, opening=closed, held=held, removed=removed_after)
+        q_back = q_plate
+
+        def make(kind, q0, q1, X_goal, poses, *, held_=None, opening_=opening, removed_=removed):
+            t0, t1 = SCHEDULE[kind]
+            times = np.linspace(t0, t1, len(poses))
+            return PlanningProblem(
+                kind=kind, scene=scene, can_id=can_id,
+                q_start=np.full(7, np.nan) if q0 is None else np.asarray(q0, float),
+                q_goal=None if q1 is None else np.asarray(q1, float),
+                X_WG_goal=X_goal,
+                waypoints=tuple(TaskWaypoint(float(t), X) for t, X in zip(times, poses)),
+                held=held_, gripper_opening_m=opening_, removed_can_ids=tuple(removed_),
+                time_limit_s=time_limit_s, seed=seed,
+                pre_status=None if (q0 is not None and q1 is not None) else PlanStatus.IK_FAILED,
+            )
+
+        chain = [
+            make("approach", q, q_pre, grasp.X_WGpre, [X_start, grasp.X_WGpre]),
+            make("descend", q_pre, q_grasp, grasp.X_WG, [grasp.X_WGpre, grasp.X_WG]),
+            make("lift", q_grasp, q_lift, X_plate, [grasp.X_WG, X_plate], held_=held, opening_=closed),
+            make("transit", q_lift, q_bin, X_bin, [X_plate, X_middle, X_bin], held_=held, opening_=closed,
+                 removed_=removed_after),
+            make("return", q_bin, q_back, X_plate, [X_bin, X_middle, X_plate], removed_=removed_after),
+        ]
+        problems += chain
+        # The next cycle starts above the plate; a can counts as gone once its cycle is posable.
+        if q_bin is not None:
+            removed = removed_after
+        q = q_back
+    return problems
+
+
+def benchmark_cycles(
+    *, scenes: int, variant: str, time_limit_s: float, first_seed: int = 0
+) -> list[list[PlanningProblem]]:
+    """The five problems of every can of `scenes` generated scenes with ground-truth grasps, one
+    list per can (the benchmarks' workload). Seeds whose scene or problems cannot be built are
+    skipped (logged), up to 3 * scenes + 10 seeds."""
+    from scenes.generate import generate_scene
+    from scenes.grasp_rule import truth_grasp
+    from scenes.spec import load_spec
+    from scenes.errors import SuiteError
+
+    spec = load_spec(variant=variant)
+    out: list[list[PlanningProblem]] = []
+    seed, made = first_seed, 0
+    while made < scenes:
+        if seed - first_seed > 3 * scenes + 10:
+            raise SuiteError(f"could draw only {made} of {scenes} {variant!r} scenes from seeds {first_seed}..{seed}")
+        try:
+            scene = generate_scene(spec, seed=seed)
+            built = build_problems(scene, [truth_grasp(scene, c) for c in scene.cans],
+                                   time_limit_s=time_limit_s, seed=seed)
+        except SuiteError as exc:
+            log.info("seed %d skipped: %s", seed, exc)
+            seed += 1
+            continue
+        out += [built[i:i + 5] for i in range(0, len(built), 5)]
+        made += 1
+        seed += 1
+    return out

@@ -1,0 +1,53 @@
+"""Everything derived from a run's saved records, written into its directory in one call."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from scenes.errors import SuiteError
+from suite.run.records import TRIALS_FILE
+
+log = logging.getLogger(__name__)
+
+
+def write_report(run_dir: str | Path, *, plots: bool = True, seed: int = 0) -> str:
+    """Write summary.md/.csv, paired.csv, the OMPL benchmark logs (arena/) and the plots (plots/).
+
+    Args:
+        run_dir: the run directory (trials.jsonl, optionally manifest.json).
+        plots: also draw the PNG figures (the slowest part, a few seconds).
+        seed: seeds the bootstrap generator of the paired comparisons.
+
+    Returns:
+        The per-planner summary table, printable.
+
+    Raises:
+        SuiteError: run_dir does not exist or holds no trials.jsonl, or a record line is broken.
+    """
+    from suite.report.arena import write_arena_logs
+    from suite.run.records import planners_in, read_manifest, read_trials
+    from suite.report.summary import summary_table, write_summary
+
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise SuiteError(f"run directory {str(run_dir)!r} does not exist")
+    if not (run_dir / TRIALS_FILE).is_file():
+        raise SuiteError(f"run directory {str(run_dir)!r} holds no {TRIALS_FILE}")
+    records = read_trials(run_dir / TRIALS_FILE)
+    planners = planners_in(records, read_manifest(run_dir))
+    from suite.execution.jobs import read_execution
+    from suite.report.summary import execution_table
+
+    executions = read_execution(run_dir)
+    written = write_summary(run_dir, records, planners=planners, seed=seed, executions=executions)
+    written += write_arena_logs(run_dir, records=records)
+    if plots:
+        from suite.report.plots import make_plots
+
+        written += make_plots(run_dir, records=records, executions=executions)
+    log.debug("wrote %s", ", ".join(str(p) for p in written))
+    table = summary_table(records, planners=planners)
+    if executions:
+        table += "\n\nExecution in physics:\n" + execution_table(executions, planners=planners, tablefmt="simple")
+    return table

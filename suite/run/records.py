@@ -1,0 +1,195 @@
+"""Reading a run's saved trial records (`trials.jsonl`) and typed access to their fields.
+
+Every table, plot and export is rebuilt from these records alone. A record is the JSON object the
+runner appended for one finished trial; the runner owns writing them, this module owns reading.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from planners.base import PlanStatus
+from scenes.errors import SuiteError
+
+log = logging.getLogger(__name__)
+
+TRIALS_FILE = "trials.jsonl"
+MANIFEST_FILE = "manifest.json"
+
+#: Every status a record may carry, in the order tables and plots list them.
+STATUSES: tuple[str, ...] = tuple(s.value for s in PlanStatus)
+SUCCESS = PlanStatus.SUCCESS.value
+
+#: The motions of the pick-and-place cycle in the order they happen.
+PROBLEM_KINDS: tuple[str, ...] = ("approach", "descend", "lift", "transit", "return")
+
+#: Fields a line must have to count as a trial record.
+REQUIRED_FIELDS = ("planner", "status", "problem", "scene_seed", "variant", "can_id")
+
+#: Metrics that are fields of the record itself rather than of its "metrics" dict.
+TOP_LEVEL_METRICS = ("planning_time_s",)
+
+
+def read_trials(path: str | Path) -> list[dict[str, Any]]:
+    """Read every trial record of a `trials.jsonl` file.
+
+    A final line that is not valid JSON is a record torn by an interrupted write: it is skipped
+    with a warning. Any other bad line is an error.
+
+    Args:
+        path: the trials.jsonl file, or the run directory holding it.
+
+    Returns:
+        The records in file order.
+
+    Raises:
+        SuiteError: the file cannot be read, or a line other than the last is not a record.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / TRIALS_FILE
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SuiteError(f"cannot read trial records {str(path)!r}: {exc.strerror}") from None
+    lines = text.split("\n")
+    last = max((i for i, line in enumerate(lines) if line.strip()), default=-1)
+    records = []
+    for i, line in enumerate(lines):
+        if not line.strip():
+            continue
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError:
+            if i == last:
+                log.warning("%s: ignoring the torn last line %d (%d characters)", path, i + 1, len(line))
+                continue
+            raise SuiteError(f"{path} line {i + 1} is not valid JSON") from None
+        if not isinstance(rec, dict):
+            raise SuiteError(f"{path} line {i + 1} is not a JSON object")
+        missing = [f for f in REQUIRED_FIELDS if f not in rec]
+        if missing:
+            raise SuiteError(f"{path} line {i + 1} lacks the field(s) {', '.join(missing)}")
+        records.append(rec)
+    return records
+
+
+def read_manifest(run_dir: str | Path) -> dict[str, Any]:
+    """The run's manifest.json as a dict, or an empty dict if there is none (or it is unreadable)."""
+    path = Path(run_dir) / MANIFEST_FILE
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        log.debug("no usable manifest at %s: %s", path, exc)
+        return {}
+
+
+# --- typed access ---------------------------------------------------------------------------------
+
+
+def is_success(rec: dict[str, Any]) -> bool:
+    """True if the trial produced a validated, timed path."""
+    return rec.get("status") == SUCCESS
+
+
+def problem_key(rec: dict[str, Any]) -> tuple[int, str, int, str]:
+    """The identity of the planning problem: (scene_seed, variant, can_id, problem kind).
+
+    Every planner of a comparison solves the same problems, so records pair on this key.
+    """
+    return (int(rec["scene_seed"]), str(rec["variant"]), int(rec["can_id"]), str(rec["problem"]))
+
+
+def metric(rec: dict[str, Any], name: str) -> float:
+    """A metric of a trial as a float; NaN when the record does not have it (e.g. failures).
+
+    `planning_time_s` is read from the record itself, every other name from its "metrics".
+    """
+    if name in TOP_LEVEL_METRICS:
+        value = rec.get(name)
+    else:
+        value = (rec.get("metrics") or {}).get(name)
+    if value is None or isinstance(value, bool):
+        return math.nan
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def metric_values(records: Iterable[dict[str, Any]], name: str, *, successful_only: bool = True) -> np.ndarray:
+    """The finite values of one metric over records (by default only successful ones)."""
+    vals = [metric(r, name) for r in records if is_success(r) or not successful_only]
+    arr = np.asarray(vals, dtype=float)
+    return arr[np.isfinite(arr)]
+
+
+def joint_path(rec: dict[str, Any]) -> np.ndarray | None:
+    """The validated joint path (N, 7) in rad, or None if the record has none."""
+    path = rec.get("path")
+    if not path:
+        return None
+    arr = np.asarray(path, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] != 7 or len(arr) < 2:
+        return None
+    return arr
+
+
+def planners_in(records: Sequence[dict[str, Any]], manifest: dict[str, Any] | None = None) -> list[str]:
+    """The planners of a run, in the manifest's order if it lists them, else in order of appearance."""
+    seen = list(dict.fromkeys(str(r["planner"]) for r in records))
+    listed = _manifest_planners(manifest or {})
+    ordered = [p for p in listed if p in seen]
+    return ordered + [p for p in seen if p not in ordered]
+
+
+def _manifest_planners(manifest: dict[str, Any]) -> list[str]:
+    for holder in (manifest, manifest.get("config") or {}):
+        value = holder.get("planners") if isinstance(holder, dict) else None
+        if isinstance(value, str):
+            return [p.strip() for p in value.split(",") if p.strip()]
+        if isinstance(value, list):
+            return [p if isinstance(p, str) else str(p.get("name", "")) for p in value]
+        if isinstance(value, dict):
+            return list(value)
+    return []
+
+
+def problem_kinds_in(records: Iterable[dict[str, Any]]) -> list[str]:
+    """The problem kinds present, in cycle order (unknown kinds last, sorted)."""
+    present = {str(r["problem"]) for r in records}
+    return [k for k in PROBLEM_KINDS if k in present] + sorted(present - set(PROBLEM_KINDS))
+
+
+def statuses_in(records: Iterable[dict[str, Any]]) -> list[str]:
+    """The statuses present, in the order of `STATUSES` (unknown ones last, sorted)."""
+    present = {str(r["status"]) for r in records}
+    return [s for s in STATUSES if s in present] + sorted(present - set(STATUSES))
+
+
+#: Where a can ended after physics execution: every can of execution.json has exactly one fate.
+BIN, BACK_ON_PLATE, ELSEWHERE, NOT_ATTEMPTED = "in the bin", "picked, back on the plate", "elsewhere", "not attempted"
+CAN_FATES = (BIN, BACK_ON_PLATE, ELSEWHERE, NOT_ATTEMPTED)
+
+
+def can_fate(can: dict[str, Any]) -> str:
+    """The fate of one can record of an execution ("where" it ended and whether it was attempted)."""
+    if can["where"] in ("bin", "elsewhere"):
+        return BIN if can["where"] == "bin" else ELSEWHERE
+    return BACK_ON_PLATE if can["attempted"] else NOT_ATTEMPTED
+
+
+def fate_counts(executions: Iterable[dict[str, Any]]) -> dict[str, int]:
+    """How many cans of these executions met each fate."""
+    counts = dict.fromkeys(CAN_FATES, 0)
+    for e in executions:
+        for c in e.get("cans", ()):
+            counts[can_fate(c)] += 1
+    return counts

@@ -1,0 +1,237 @@
+"""Run orchestration: scenes -> grasps -> problems -> trials -> trials.jsonl (+ manifest).
+
+The parent process prepares the problems, hands trials to an executor, and is the only writer of
+trials.jsonl: one line per finished trial, flushed as it finishes, so an interrupted run loses
+at most the trials in flight. `resume` skips trials already recorded.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import json
+import logging
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from scenes.errors import SuiteError
+from suite.run.trial import TrialSpec, config_dict, make_config, make_trial, run_trial
+
+log = logging.getLogger(__name__)
+
+TRIALS_FILE = "trials.jsonl"
+MANIFEST_FILE = "manifest.json"
+#: Grace beyond a trial's time limit before the parent kills its worker (scene building, timing).
+HARD_LIMIT_GRACE_S = 30.0
+HARD_LIMIT_FACTOR = 3.0
+
+
+@dataclasses.dataclass(frozen=True)
+class CompareConfig:
+    """The settings of a comparison run (CLI flags or a YAML file)."""
+
+    planners: tuple[str, ...] = ("ik", "rrt", "trajopt")
+    variant: str = "wall"
+    seed: int = 0
+    scenes: int = 4
+    cans: int = 3
+    grasps: str = "truth"
+    time_limit_s: float = 5.0
+    jobs: int = 2
+    spec: str | None = None
+    planner_configs: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
+    executor: str = "local"
+    scheduler: str | None = None
+    hard_limit_grace_s: float = HARD_LIMIT_GRACE_S
+
+
+def worker_init() -> None:
+    """Runs once in each worker process: quiet logs, OMPL's process-global seed set once, and the
+    built-in planners imported up front (while the parent is still preparing problems)."""
+    import importlib
+
+    from planners.registry import BUILTIN
+
+    logging.basicConfig(level=logging.WARNING)
+    for target in sorted(set(BUILTIN.values())):
+        try:
+            importlib.import_module(target.partition(":")[0])
+        except ImportError:  # reported by the trial that needs it
+            pass
+    try:
+        from ompl import util as ou
+
+        ou.RNG.setSeed(1)  # per-trial samplers carry the trial's own seed; this only fixes the rest
+        ou.setLogLevel(ou.LOG_WARN)
+    except Exception:  # OMPL missing or already seeded: the trial-level seeding still holds
+        pass
+
+
+def scene_grasps(scene, *, grasps: str):
+    """The grasps to plan for: ground truth, or perceived from the rendered cameras."""
+    from scenes.grasp_rule import truth_grasp
+
+    if grasps == "truth":
+        return [truth_grasp(scene, c) for c in scene.cans]
+    from perception.pipeline import perceive
+
+    return [d.grasp for d in perceive(scene).detections]
+
+
+def prepare_trials(config: CompareConfig, *, progress=None) -> list[TrialSpec]:
+    """Generate the scenes, their grasps and problems, and one trial per problem and planner."""
+    from planners.registry import planner_class
+    from scenes.generate import generate_scene
+    from scenes.spec import load_spec
+    from suite.problems.cycle import build_problems
+
+    spec = load_spec(config.spec, variant=config.variant).with_can_count(config.cans)
+    configs = {}
+    for name in config.planners:
+        cls = planner_class(name)
+        configs[name] = config_dict(make_config(cls, config.planner_configs.get(name)))
+    trials = []
+    for scene_seed in range(config.seed, config.seed + config.scenes):
+        scene = generate_scene(spec, seed=scene_seed)
+        grasps = scene_grasps(scene, grasps=config.grasps)
+        problems = build_problems(scene, grasps, time_limit_s=config.time_limit_s, seed=scene_seed)
+        for problem in problems:
+            for name in config.planners:
+                trials.append(make_trial(problem, planner=name, planner_config=configs[name], run_seed=config.seed))
+        if progress is not None:
+            progress(scene_seed)
+    return trials
+
+
+def failure_record(spec: TrialSpec, status: str, message: str, wall_time_s: float) -> dict[str, Any]:
+    """The record of a trial whose worker crashed or was killed."""
+    p = spec.problem
+    return {
+        "trial_id": spec.trial_id, "planner": spec.planner, "planner_config": spec.planner_config,
+        "scene_seed": p.scene.seed, "scene_key": p.scene.key(), "variant": p.scene.variant,
+        "can_id": p.can_id, "problem": p.kind, "held": p.held is not None, "seed": p.seed,
+        "time_limit_s": p.time_limit_s,
+        "q_start": None if p.q_start is None else [float(v) for v in p.q_start],
+        "q_goal": None if p.q_goal is None else [float(v) for v in p.q_goal],
+        "status": status, "planning_time_s": wall_time_s, "path": None, "metrics": {},
+        "stats": {"error": message},
+    }
+
+
+def recorded_trial_ids(path: Path) -> set[str]:
+    """Ids of the trials already in a trials.jsonl; a torn last line is cut off the file."""
+    if not path.exists():
+        return set()
+    data = path.read_bytes()
+    ids = set()
+    good_end = 0
+    pos = 0
+    for line in data.splitlines(keepends=True):
+        pos += len(line)
+        if not line.endswith(b"\n"):
+            break  # torn: the run was killed while writing it
+        try:
+            ids.add(json.loads(line)["trial_id"])
+        except (ValueError, KeyError):
+            lineno = data[:pos].count(b"\n")
+            raise SuiteError(f"{path}: line {lineno} is not a trial record") from None
+        good_end = pos
+    if good_end < len(data):
+        log.warning("%s: dropping a torn last line (%d bytes)", path, len(data) - good_end)
+        with open(path, "r+b") as f:
+            f.truncate(good_end)
+    return ids
+
+
+def git_commit() -> str | None:
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True,
+                             text=True, timeout=5)
+        return out.stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def versions() -> dict[str, str | None]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for dist in ("drake", "ompl", "python-fcl", "toppra", "numpy", "opencv-python-headless", "scipy"):
+        try:
+            out[dist] = version(dist)
+        except PackageNotFoundError:
+            out[dist] = None
+    return out
+
+
+def write_manifest(out: Path, config: CompareConfig, *, argv: list[str]) -> None:
+    from suite.run.executors import cpu_description
+
+    manifest = {
+        "command": " ".join(["python -m suite"] + argv),
+        "config": dataclasses.asdict(config),
+        "versions": versions(),
+        "git_commit": git_commit(),
+        "machine": {**cpu_description(), "platform": platform.platform()},
+        "started_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+    (out / MANIFEST_FILE).write_text(json.dumps(manifest, indent=2) + "\n")
+
+
+def make_executor(executor: str, *, jobs: int, scheduler: str | None = None):
+    """The executor named on the command line ("local" or "dask")."""
+    from suite.run.executors import LocalExecutor
+
+    if executor == "local":
+        return LocalExecutor(jobs=jobs, init=worker_init)
+    if executor == "dask":
+        from suite.run.dask_executor import DaskExecutor
+
+        return DaskExecutor(scheduler=scheduler, n_workers=jobs, init=worker_init)
+    raise SuiteError(f"unknown executor {executor!r}; allowed: local, dask")
+
+
+def run_trials(trials: list[TrialSpec], *, out: Path, jobs: int, executor="local",
+               scheduler: str | None = None, progress_bar: bool = True,
+               hard_limit_grace_s: float = HARD_LIMIT_GRACE_S) -> dict[str, int]:
+    """Run trials not yet recorded in out/trials.jsonl and append their records as they finish.
+
+    `executor` is "local", "dask", or an executor already made by `make_executor` (e.g. started
+    early so that its workers import while the problems are prepared).
+
+    Returns:
+        Counts: {"total", "skipped", "ran"}.
+    """
+    from tqdm import tqdm
+
+    from suite.run.executors import Job
+
+    path = out / TRIALS_FILE
+    done = recorded_trial_ids(path)
+    todo = [t for t in trials if t.trial_id not in done]
+    by_key = {t.trial_id: t for t in todo}
+    ex = make_executor(executor, jobs=jobs, scheduler=scheduler) if isinstance(executor, str) else executor
+    # Trials of one scene go to the same worker where possible: its cached worlds serve them all.
+    # The usually long ones (transit and return, where the arm crosses the workspace) go first, so
+    # that the last trials of a run are short ones and no worker idles long at the end.
+    todo_ordered = sorted(todo, key=lambda t: t.problem.kind not in ("transit", "return"))
+    jobs_ = [Job(t.trial_id, run_trial, t, t.problem.time_limit_s * HARD_LIMIT_FACTOR + hard_limit_grace_s,
+                 group=t.problem.scene.key()) for t in todo_ordered]
+    bar = tqdm(total=len(trials), initial=len(trials) - len(todo), desc="trials", unit="trial",
+               disable=not progress_bar, file=sys.stderr, dynamic_ncols=True)
+    with open(path, "a") as f:
+        for outcome in ex.run(jobs_):
+            spec = by_key[outcome.job.key]
+            record = outcome.result if outcome.failure is None else failure_record(
+                spec, outcome.failure, outcome.message, outcome.wall_time_s)
+            f.write(json.dumps(record) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+            bar.set_postfix_str(f"{spec.planner} {spec.problem.kind}: {record['status']}", refresh=False)
+            bar.update(1)
+    bar.close()
+    return {"total": len(trials), "skipped": len(trials) - len(todo), "ran": len(todo)}

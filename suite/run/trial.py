@@ -1,0 +1,191 @@
+"""One trial: a planner on a problem, then the same validation, timing and scoring for all.
+
+`run_trial` is the function every executor runs (in a worker process); it returns the plain
+JSON record that the parent appends to trials.jsonl.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import time
+import traceback
+from typing import Any
+
+import numpy as np
+
+from planners.base import PlanningProblem, PlanResult, PlanStatus
+
+log = logging.getLogger(__name__)
+
+#: The validator's resolution: at most this much motion of any joint between two checked states.
+VALIDATION_RESOLUTION_RAD = 0.01
+ENDPOINT_TOLERANCE_RAD = 1e-6
+
+
+@dataclasses.dataclass(frozen=True)
+class TrialSpec:
+    """Everything a worker needs to run one trial (picklable plain values)."""
+
+    trial_id: str
+    planner: str
+    planner_config: dict[str, Any]
+    problem: PlanningProblem
+
+
+def derive_seed(*parts: Any) -> int:
+    """A 31-bit seed from a run seed and a trial's identity (stable across machines)."""
+    digest = hashlib.sha256("|".join(str(p) for p in parts).encode()).digest()
+    return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
+
+
+def trial_id(*, problem: PlanningProblem, planner: str, planner_config: dict) -> str:
+    """Hash of (scene spec and cans, seed, problem, planner and its config)."""
+    blob = json.dumps(
+        {
+            "scene": problem.scene.key(),
+            "scene_seed": problem.scene.seed,
+            "can": problem.can_id,
+            "problem": problem.kind,
+            "seed": problem.seed,
+            "time_limit_s": problem.time_limit_s,
+            "planner": planner,
+            "config": planner_config,
+        },
+        sort_keys=True,
+    )
+    return hashlib.sha256(blob.encode()).hexdigest()[:20]
+
+
+def make_config(planner_cls, overrides: dict[str, Any] | None):
+    """The planner's Config dataclass with overrides; unknown fields are a SuiteError."""
+    from scenes.errors import SuiteError
+
+    cfg_cls = planner_cls.Config
+    overrides = dict(overrides or {})
+    fields = {f.name for f in dataclasses.fields(cfg_cls)}
+    unknown = set(overrides) - fields
+    if unknown:
+        raise SuiteError(
+            f"unknown setting {sorted(unknown)[0]!r} for planner {planner_cls.name!r}; allowed: {sorted(fields)}"
+        )
+    return cfg_cls(**overrides)
+
+
+def config_dict(config) -> dict[str, Any]:
+    """A Config as plain JSON values."""
+    return json.loads(json.dumps(dataclasses.asdict(config), default=str))
+
+
+def validate_path(problem: PlanningProblem, path: np.ndarray | None, world) -> str | None:
+    """The independent check of a claimed solution; None if valid, else the reason.
+
+    The path must be finite (N, 7), start at q_start and end at q_goal, stay within the joint
+    limits, and be collision-free when its straight segments are checked with at most
+    VALIDATION_RESOLUTION_RAD of joint motion between states (python-fcl world).
+    """
+    if path is None:
+        return "no path"
+    path = np.asarray(path, float)
+    if path.ndim != 2 or path.shape[1] != 7 or len(path) < 1 or not np.all(np.isfinite(path)):
+        return f"path must be a finite (N, 7) array, got shape {path.shape}"
+    if np.max(np.abs(path[0] - problem.q_start)) > ENDPOINT_TOLERANCE_RAD:
+        return "path does not start at q_start"
+    if np.max(np.abs(path[-1] - problem.q_goal)) > ENDPOINT_TOLERANCE_RAD:
+        return "path does not end at q_goal"
+    lo, hi = world.robot.lower_rad, world.robot.upper_rad
+    if np.any(path < lo - 1e-9) or np.any(path > hi + 1e-9):
+        return "path leaves the joint limits"
+    bad = world.path_free(path, resolution_rad=VALIDATION_RESOLUTION_RAD)
+    if bad >= 0:
+        return f"collision at dense sample {bad}"
+    return None
+
+
+def make_trial(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int) -> TrialSpec:
+    """The trial of a planner on a problem, its seed derived from the run seed and the problem's
+    identity (the one seeding rule of `compare`, `plan` and `execute`)."""
+    p = problem.with_(seed=derive_seed(run_seed, problem.scene.key(), problem.can_id, problem.kind, planner))
+    return TrialSpec(trial_id(problem=p, planner=planner, planner_config=planner_config), planner, planner_config, p)
+
+
+def run_problem(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int) -> dict[str, Any]:
+    """One trial in this process, seeded as `compare` seeds it."""
+    return run_trial(make_trial(problem, planner=planner, planner_config=planner_config, run_seed=run_seed))
+
+
+def run_trial(spec: TrialSpec) -> dict[str, Any]:
+    """Plan, validate, time and score one trial; never raises for a planner's failure."""
+    from planners.registry import planner_class
+    from planners.worlds import collision_world
+
+    problem = spec.problem
+    record: dict[str, Any] = {
+        "trial_id": spec.trial_id,
+        "planner": spec.planner,
+        "planner_config": spec.planner_config,
+        "scene_seed": problem.scene.seed,
+        "scene_key": problem.scene.key(),
+        "variant": problem.scene.variant,
+        "can_id": problem.can_id,
+        "problem": problem.kind,
+        "held": problem.held is not None,
+        "seed": problem.seed,
+        "time_limit_s": problem.time_limit_s,
+        "q_start": _list(problem.q_start),
+        "q_goal": _list(problem.q_goal),
+    }
+    world = collision_world(problem)
+    t0 = time.perf_counter()
+    try:
+        cls = planner_class(spec.planner)
+        planner = cls(make_config(cls, spec.planner_config))
+        result = planner.plan(problem)
+    except Exception as exc:  # a planner bug is this trial's error, not the run's
+        log.debug("planner %s raised on %s", spec.planner, problem.name, exc_info=True)
+        result = PlanResult(PlanStatus.ERROR, None, {"error": f"{type(exc).__name__}: {exc}",
+                                                     "traceback": traceback.format_exc(limit=5)})
+    planning_time_s = time.perf_counter() - t0
+    status = PlanStatus(result.status)
+    stats = dict(result.stats)
+    path = None if result.path is None else np.asarray(result.path, float)
+    metrics: dict[str, float] = {}
+    if status == PlanStatus.SUCCESS:
+        reason = validate_path(problem, path, world)
+        if reason is not None:
+            status = PlanStatus.INVALID_SOLUTION
+            stats["invalid_reason"] = reason
+        else:
+            from suite.scoring.metrics import score
+            from suite.scoring.timing import time_parameterize
+
+            timed = time_parameterize(path, robot=world.robot)
+            if timed.status != "ok":
+                status = PlanStatus.TIMING_FAILED
+                stats["timing_reason"] = timed.reason
+            scored = score(path=path, world=world, X_WG_goal=problem.X_WG_goal, timed=timed)
+            # NaN (the timing metrics of an untimed path) is stored as null: JSON has no NaN.
+            metrics = {k: (float(v) if np.isfinite(v) else None) for k, v in scored.items()
+                       if isinstance(v, (int, float)) and not isinstance(v, bool)}
+    record.update(
+        status=status.value,
+        planning_time_s=planning_time_s,
+        path=None if path is None or status not in (PlanStatus.SUCCESS, PlanStatus.TIMING_FAILED)
+        else path.round(10).tolist(),
+        metrics=metrics,
+        stats=_jsonable(stats),
+    )
+    return record
+
+
+def _list(q) -> list[float] | None:
+    if q is None:
+        return None
+    q = np.asarray(q, float)
+    return None if not np.all(np.isfinite(q)) else q.round(12).tolist()
+
+
+def _jsonable(obj):
+    return json.loads(json.dumps(obj, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))

@@ -1,0 +1,164 @@
+"""The OMPL planners: rrt solves a transit over the wall with a collision-free path, bad endpoints
+are reported at once, a trial's path depends on its seed alone, an optimizing planner solves."""
+
+import pickle
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planners.base import PlanStatus
+from planners.ompl_rrt import (
+    AORRTCConfig,
+    RRTConnectConfig,
+    drop_collinear,
+    motion_samples,
+    trial_seed,
+)
+from planners.registry import make_planner
+from scenes.grasp_rule import truth_grasp
+from scenes.errors import SuiteError
+from suite.problems.cycle import build_problems
+from planners.worlds import collision_world
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def problems(wall_scene):
+    scene = wall_scene
+    return build_problems(scene, [truth_grasp(scene, scene.cans[0])], time_limit_s=5.0, seed=3)
+
+
+@pytest.fixture(scope="module")
+def transit(problems):
+    (p,) = [p for p in problems if p.kind == "transit"]
+    assert p.pre_status is None
+    return p
+
+
+def _colliding_configuration(world, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    for q in world.robot.random_configurations(rng, 500):
+        if not world.is_free(q):
+            return q
+    raise AssertionError("no colliding configuration among 500 random ones")
+
+
+def test_rrt_solves_transit_over_the_wall(transit):
+    world = collision_world(transit)
+    # the straight motion hits the wall: the planner has to go around it
+    assert world.path_free(np.array([transit.q_start, transit.q_goal]), resolution_rad=0.01) >= 0
+    r = make_planner("rrt").plan(transit)
+    assert r.status is PlanStatus.SUCCESS
+    assert r.path.ndim == 2 and r.path.shape[1] == 7 and len(r.path) >= 3
+    assert np.array_equal(r.path[0], transit.q_start) and np.array_equal(r.path[-1], transit.q_goal)
+    assert world.path_free(r.path, resolution_rad=0.01) == -1
+    s = r.stats
+    assert s["solver"] == "RRTConnect" and s["waypoints"] == len(r.path) and not s["interpolated"]
+    assert s["collision_checks"] > 0 and s["solve_time_s"] > 0 and s["simplify_time_s"] >= 0
+    assert 0 < s["length_after_rad"] <= s["length_before_rad"] + 1e-9
+    assert s["length_after_rad"] == pytest.approx(np.linalg.norm(np.diff(r.path, axis=0), axis=1).sum())
+
+
+def test_interpolated_path_keeps_joint_steps_small(transit):
+    r = make_planner("rrt", RRTConnectConfig(interpolate_rad=0.05)).plan(transit)
+    assert r.status is PlanStatus.SUCCESS and r.stats["interpolated"]
+    assert np.max(np.abs(np.diff(r.path, axis=0))) <= 0.05 + 1e-12
+    assert np.array_equal(r.path[0], transit.q_start) and np.array_equal(r.path[-1], transit.q_goal)
+
+
+@pytest.mark.parametrize("end", ["start", "goal"])
+def test_endpoint_in_collision_is_reported_at_once(transit, end):
+    world = collision_world(transit)
+    q = _colliding_configuration(world, seed=5)
+    problem = transit.with_(q_start=q) if end == "start" else transit.with_(q_goal=q)
+    t0 = time.perf_counter()
+    r = make_planner("rrt").plan(problem)
+    elapsed_s = time.perf_counter() - t0
+    assert r.status is (PlanStatus.INVALID_START if end == "start" else PlanStatus.INVALID_GOAL)
+    assert r.path is None and r.stats["reason"] == "in collision"
+    assert r.stats["collision_checks"] <= 2 and elapsed_s < 0.5
+
+
+def test_ik_failure_passes_through(transit):
+    r = make_planner("rrt").plan(transit.with_(q_goal=None))
+    assert r.status is PlanStatus.IK_FAILED and r.path is None
+
+
+def test_same_seed_same_path_different_seed_other_path(problems, transit):
+    planner = make_planner("rrt")
+    first = planner.plan(transit)
+    # other trials in between must not change this trial's result
+    for p in problems:
+        if p.kind in ("approach", "return"):
+            planner.plan(p)
+    second = planner.plan(transit)
+    assert first.status is second.status is PlanStatus.SUCCESS
+    assert np.array_equal(first.path, second.path)
+    other = planner.plan(transit.with_(seed=transit.seed + 1))
+    assert trial_seed(transit.with_(seed=transit.seed + 1)) != trial_seed(transit)
+    assert other.status is PlanStatus.SUCCESS
+    assert other.path.shape != first.path.shape or not np.allclose(other.path, first.path)
+
+
+def test_same_seed_same_path_across_processes(transit, tmp_path):
+    """A fresh process (OMPL seeded differently at start) gives the same path; nothing OMPL
+    allocated is reported leaked at exit."""
+    here = make_planner("rrt").plan(transit)
+    (tmp_path / "p.pkl").write_bytes(pickle.dumps(transit))
+    code = (
+        "import pickle, sys\n"
+        "from ompl import util as ou\n"
+        "ou.RNG.setSeed(987654)\n"
+        "from planners.registry import make_planner\n"
+        f"p = pickle.loads(open({str(tmp_path / 'p.pkl')!r}, 'rb').read())\n"
+        "r = make_planner('rrt').plan(p)\n"
+        "sys.stdout.write(r.status.value + ' ' + r.path.tobytes().hex())\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert out.returncode == 0, out.stderr
+    status, hexpath = out.stdout.split()
+    assert status == "success"
+    assert np.array_equal(np.frombuffer(bytes.fromhex(hexpath)).reshape(-1, 7), here.path)
+    assert "leak" not in out.stderr, out.stderr
+
+
+def test_optimizing_planner_solves_transit(transit):
+    budget_s = 1.0
+    t0 = time.perf_counter()
+    r = make_planner("aorrtc", AORRTCConfig(time_limit_s=budget_s)).plan(transit)
+    elapsed_s = time.perf_counter() - t0
+    assert r.status is PlanStatus.SUCCESS
+    assert collision_world(transit).path_free(r.path, resolution_rad=0.01) == -1
+    assert np.array_equal(r.path[0], transit.q_start) and np.array_equal(r.path[-1], transit.q_goal)
+    assert r.stats["solver"] == "AORRTC" and r.stats["best_cost"] > 0
+    # it runs to its budget (less the simplification share), not beyond it by much
+    assert r.stats["solve_time_s"] >= 0.8 * budget_s and elapsed_s < budget_s + 2.0
+
+
+def test_motion_samples_cover_the_motion_end_first():
+    q0, q1 = np.zeros(7), np.linspace(-0.3, 0.7, 7)
+    Q = motion_samples(q0, q1, 0.05)
+    assert np.array_equal(Q[0], q1)
+    steps = np.sort(Q[:, -1])  # the last joint moves most
+    assert len(Q) == 14 and np.max(np.abs(np.diff(np.vstack([q0, Q[np.argsort(Q[:, -1])]]), axis=0))) <= 0.05 + 1e-12
+    assert steps[-1] == pytest.approx(0.7)
+
+
+def test_drop_collinear_keeps_corners_only():
+    a, b, c = np.zeros(7), np.full(7, 1.0), np.array([1.0, 2, 1, 1, 1, 1, 1])
+    Q = np.vstack([a, 0.25 * b, 0.5 * b, b, 0.5 * (b + c), c])
+    assert np.array_equal(drop_collinear(Q), np.vstack([a, b, c]))
+
+
+def test_bad_config_is_a_user_error():
+    with pytest.raises(SuiteError, match="resolution_rad"):
+        RRTConnectConfig(resolution_rad=0.0)
+    with pytest.raises(SuiteError, match="simplifier"):
+        RRTConnectConfig(simplifier="magic")
+    with pytest.raises(SuiteError, match="takes a RRTConnectConfig"):
+        make_planner("rrt", AORRTCConfig())

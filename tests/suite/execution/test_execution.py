@@ -1,0 +1,165 @@
+"""Physics execution: plans run in a Drake simulation with contact; are the cans recycled?"""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from planners.registry import planner_class
+from scenes.generate import generate_scene
+from scenes.grasp_rule import truth_grasp
+from scenes.spec import load_spec
+from suite.execution.jobs import ExecutionJob, can_pose_from, plan_cans, _open_loop
+from suite.execution.simulate import bin_region, execute_cycles, where
+from suite.problems.cycle import build_problems
+from suite.run.trial import config_dict, make_config
+
+
+def _one_can_scene(*, lying: bool, variant: str = "open"):
+    spec = load_spec(variant=variant).with_can_count(1)
+    for seed in range(100):
+        scene = generate_scene(spec, seed=seed)
+        if scene.cans[0].lying == lying:
+            return scene
+    raise AssertionError("no such scene in 100 seeds")
+
+
+def _execute(scene, grasps, planner="rrt"):
+    problems = build_problems(scene, grasps, time_limit_s=5.0, seed=scene.seed)
+    job = ExecutionJob(planner, config_dict(make_config(planner_class(planner), None)), scene, "truth", 5.0,
+                       scene.seed)
+    cans = plan_cans(problems, job)
+    assert all(not failed for _, _, failed in cans), cans
+    return execute_cycles(scene, _open_loop(cans), q_home=problems[0].q_start, planner=planner)
+
+
+@pytest.mark.parametrize("lying", [False, True])
+def test_one_can_end_to_end_lands_in_the_bin(lying):
+    scene = _one_can_scene(lying=lying)
+    out = _execute(scene, [truth_grasp(scene, scene.cans[0])])
+    assert out.cans_attempted == 1 and out.stopped == ""
+    assert out.cans_in_bin == 1, out.to_json()
+    assert out.cans[0].where == "bin" and out.clear_time_s is not None
+    assert 0 < out.clear_time_s < out.sim_time_s
+    # The arm follows its command closely and the can does not move in the closed gripper.
+    assert out.peak_tracking_error_rad < 0.05
+    assert out.peak_slip_m < 0.01
+    lo, hi = bin_region(scene.spec)
+    assert np.all(np.array(out.cans[0].p_WC_m) > lo) and np.all(np.array(out.cans[0].p_WC_m) < hi)
+    json.dumps(out.to_json())  # the record is plain JSON
+
+
+def test_a_grasp_3cm_off_the_can_is_reported_not_recycled():
+    scene = _one_can_scene(lying=False)
+    good = truth_grasp(scene, scene.cans[0])
+    # 3 cm along the gripper's z axis (across both the approach and the closing direction): the
+    # fingers close on the rim of the can instead of across its diameter.
+    bad_X = good.X_WG.copy()
+    bad_X[:3, 3] += 0.03 * good.X_WG[:3, 2]
+    bad_pre = good.X_WGpre.copy()
+    bad_pre[:3, 3] += 0.03 * good.X_WG[:3, 2]
+    bad = type(good)(good.can_id, bad_X, bad_pre, good.lying)
+    out = _execute(scene, [bad])
+    assert out.cans_attempted == 1
+    assert out.cans_in_bin == 0
+    assert out.cans[0].where in ("plate", "elsewhere")
+    assert out.clear_time_s is None
+
+
+def test_where_classifies_bin_plate_and_elsewhere():
+    spec = load_spec(variant="open")
+    lo, hi = bin_region(spec)
+    assert where(spec, (lo + hi) / 2) == "bin"
+    assert where(spec, np.array([*spec.plate.center_m[:2], spec.plate_top_z_m + 0.03])) == "plate"
+    assert where(spec, np.array([-0.5, -0.5, 0.03])) == "elsewhere"
+    above_bin = (lo + hi) / 2
+    above_bin[2] = hi[2] + 0.2  # still in the gripper over the bin
+    assert where(spec, above_bin) == "elsewhere"
+
+
+def test_can_pose_from_a_simulated_pose():
+    X = np.eye(4)
+    X[:3, 3] = [0.6, -0.1, 0.081]
+    assert not can_pose_from(3, X).lying
+    c, s = math.cos(0.4), math.sin(0.4)
+    # axis along (c, s, 0): lying with that yaw
+    R = np.array([[0, -s, c], [0, c, s], [-1, 0, 0.0]])
+    X[:3, :3] = R
+    pose = can_pose_from(3, X)
+    assert pose.lying and pose.id == 3
+    assert abs(pose.axis_yaw_rad - 0.4) < 1e-9
+
+
+def _scene_with_a_moved_can():
+    """A 2-can scene and the same scene with can 1 moved 10 cm (on the plate, clear of can 0)."""
+    import dataclasses
+
+    spec = load_spec(variant="open").with_can_count(2)
+    plate_c, half = np.array(spec.plate.center_m[:2]), np.array(spec.plate.size_m[:2]) / 2 - 0.07
+    for seed in range(30):
+        believed = generate_scene(spec, seed=seed)
+        a, b = believed.cans
+        for angle in np.linspace(0, 2 * np.pi, 16, endpoint=False):
+            xy = np.array(b.p_WC_m[:2]) + 0.10 * np.array([np.cos(angle), np.sin(angle)])
+            if np.all(np.abs(xy - plate_c) <= half) and np.linalg.norm(xy - np.array(a.p_WC_m[:2])) > 0.14:
+                moved = dataclasses.replace(b, p_WC_m=(float(xy[0]), float(xy[1]), b.p_WC_m[2]))
+                return believed, dataclasses.replace(believed, cans=(a, moved))
+    raise AssertionError("no scene with room to move a can")
+
+
+def test_reperceive_picks_a_moved_can_from_where_it_really_is():
+    """The plan was made for where the can was; the can has since moved 10 cm. Open loop grasps at
+    the old place and misses it; closed loop (perceive after each pick) recycles it."""
+    from suite.execution.jobs import ExecutionJob, run_execution
+
+    believed, actual = _scene_with_a_moved_can()
+    config = config_dict(make_config(planner_class("rrt"), None))
+    problems = build_problems(believed, [truth_grasp(believed, c) for c in believed.cans], time_limit_s=5.0,
+                              seed=believed.seed)
+    job = ExecutionJob("rrt", config, believed, "perceived", 5.0, believed.seed)
+    stale = execute_cycles(actual, _open_loop(plan_cans(problems, job)), q_home=problems[0].q_start,
+                           planner="rrt")
+    assert stale.cans[0].where == "bin"
+    assert stale.cans[1].where != "bin"
+
+    closed = run_execution(ExecutionJob("rrt", config, actual, "perceived", 5.0, actual.seed, reperceive=True))
+    assert closed["cans_in_bin"] == 2, closed
+
+
+def _cli(*args):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "suite", *args], capture_output=True, text=True)
+
+
+def test_execute_command_writes_the_record_and_a_self_contained_replay(tmp_path):
+    import re
+
+    out = tmp_path / "run"
+    r = _cli("execute", "--planner", "rrt", "--seed", "0", "--cans", "1", "--variant", "open", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "in bin 1/1" in r.stdout
+    (rec,) = json.loads((out / "execution.json").read_text())["executions"]
+    assert rec["planner"] == "rrt" and rec["cans_in_bin"] == 1 and rec["replay"] == "replay_rrt.html"
+    html = (out / "replay_rrt.html").read_text()
+    assert html.lstrip().startswith("<!DOCTYPE html>")
+    # Self-contained: no script or stylesheet fetched from anywhere.
+    assert not re.search(r"<script[^>]+src=", html) and not re.search(r"<link[^>]+href=\"http", html)
+    import base64
+
+    commands = [base64.b64decode(b) for b in re.findall(r'data:application/octet-binary;base64,([A-Za-z0-9+/=]+)', html)]
+    assert any(b"set_animation" in c for c in commands)  # the recorded motion, embedded
+
+
+def test_execute_command_rejects_bad_input_in_one_line(tmp_path):
+    r = _cli("execute", "--planner", "nope", "--out", str(tmp_path / "x"))
+    assert r.returncode == 2 and "nope" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    r = _cli("execute", "--planner", "rrt", "--cans", "-1", "--out", str(tmp_path / "x"))
+    assert r.returncode == 2 and "-1" in r.stderr
+    blocker = tmp_path / "file"
+    blocker.write_text("keep me")
+    r = _cli("execute", "--planner", "rrt", "--cans", "1", "--out", str(blocker / "sub"))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert blocker.read_text() == "keep me"

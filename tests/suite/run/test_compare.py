@@ -1,0 +1,158 @@
+"""The comparison end to end: records, resume, jobs-independence, isolation, bad input."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+FIXTURES = Path(__file__).resolve().parents[2] / "fixtures"
+ROOT = Path(__file__).resolve().parents[3]
+TINY = ["--planners", "ik,rrt", "--scenes", "1", "--cans", "1", "--variant", "wall", "--time-limit-s", "2",
+        "--no-plots", "--no-progress"]
+
+
+def compare(*args, env=None, check=True, timeout=240):
+    return subprocess.run([sys.executable, "-m", "suite", "compare", *args], capture_output=True, text=True,
+                          check=check, env=env, cwd=ROOT, timeout=timeout)
+
+
+def records(out: Path) -> list[dict]:
+    return [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
+
+
+def comparable(recs):
+    """Everything but wall-clock figures, keyed by trial id."""
+    out = {}
+    for r in recs:
+        r = dict(r)
+        r.pop("planning_time_s")
+        r["metrics"] = {k: v for k, v in r["metrics"].items() if not k.endswith("time_s")}
+        r["stats"] = {k: v for k, v in r["stats"].items() if not k.endswith("time_s") and k != "iterations"}
+        out[r["trial_id"]] = r
+    return out
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "jobs2"
+    res = compare(*TINY, "--jobs", "2", "--out", str(out))
+    return out, res
+
+
+def test_tiny_run_end_to_end(tiny_run):
+    out, res = tiny_run
+    recs = records(out)
+    assert len(recs) == 10  # 1 can x 5 problems x 2 planners
+    assert {r["problem"] for r in recs} == {"approach", "descend", "lift", "transit", "return"}
+    for r in recs:
+        for key in ("trial_id", "planner", "scene_seed", "variant", "can_id", "problem", "status",
+                    "planning_time_s", "q_start", "q_goal", "path", "metrics", "stats", "seed"):
+            assert key in r
+    rrt = [r for r in recs if r["planner"] == "rrt"]
+    assert all(r["status"] == "success" for r in rrt)
+    assert all(r["metrics"]["duration_s"] > 0 for r in rrt if r["problem"] == "transit")
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["versions"]["drake"].startswith("1.51")
+    assert manifest["machine"]["cores"] >= 1
+    assert (out / "summary.md").exists() and (out / "summary.csv").exists()
+    assert "rrt" in res.stdout and "5/5" in res.stdout
+
+
+def test_jobs_do_not_change_the_records(tiny_run, tmp_path):
+    out2, _ = tiny_run
+    out1 = tmp_path / "jobs1"
+    compare(*TINY, "--jobs", "1", "--out", str(out1))
+    a, b = comparable(records(out1)), comparable(records(out2))
+    assert a.keys() == b.keys()
+    for k in a:
+        assert a[k]["status"] == b[k]["status"]
+        assert a[k]["path"] == b[k]["path"], (a[k]["planner"], a[k]["problem"])
+
+
+def test_resume_after_kill_loses_and_duplicates_nothing(tiny_run, tmp_path):
+    out = tmp_path / "killed"
+    proc = subprocess.Popen([sys.executable, "-m", "suite", "compare", *TINY, "--jobs", "1", "--out", str(out)],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    trials = out / "trials.jsonl"
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline:
+        if trials.exists() and len(trials.read_text().splitlines()) >= 3:
+            break
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    n_before = len(trials.read_text().splitlines())
+    assert 3 <= n_before < 10
+    with open(trials, "a") as f:
+        f.write('{"trial_id": "torn')  # a line cut short by the kill
+    compare(*TINY, "--jobs", "2", "--out", str(out), "--resume")
+    recs = records(out)
+    ids = [r["trial_id"] for r in recs]
+    assert len(ids) == len(set(ids)) == 10
+    assert set(ids) == set(comparable(records(tiny_run[0])))
+
+
+def test_crash_and_hang_are_isolated(tmp_path):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(FIXTURES / "crashy"), str(ROOT)]))
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("hard_limit_grace_s: 3\n")
+    out = tmp_path / "crashy"
+    compare("--planners", "crashy,rrt", "--scenes", "1", "--cans", "1", "--variant", "wall", "--time-limit-s", "0.5",
+            "--jobs", "2", "--no-plots", "--no-progress", "--config", str(cfg), "--out", str(out), env=env)
+    by = {(r["planner"], r["problem"]): r["status"] for r in records(out)}
+    assert by[("crashy", "descend")] == "crash"
+    assert by[("crashy", "lift")] == "killed_timeout"
+    assert by[("crashy", "approach")] == "no_solution"
+    assert all(by[("rrt", p)] == "success" for p in ("approach", "descend", "lift", "transit", "return"))
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["--planners", "ik,warp"], "unknown planner 'warp'"),
+        (["--scenes", "0"], "--scenes"),
+        (["--cans", "-1"], "--cans"),
+        (["--time-limit-s", "nan"], "--time-limit-s"),
+        (["--time-limit-s", "-3"], "--time-limit-s"),
+        (["--variant", "moon"], "unknown variant 'moon'"),
+        (["--out", "/proc/forbidden/run"], "not writable"),
+        (["--resume"], "--resume needs --out"),
+    ],
+)
+def test_bad_input_fails_before_any_trial(args, needle, tmp_path):
+    res = compare(*args, check=False, timeout=60)
+    assert res.returncode != 0
+    lines = [l for l in res.stderr.splitlines() if l.strip()]
+    assert len(lines) == 1, res.stderr
+    assert needle in lines[0]
+
+
+def test_existing_run_is_not_overwritten(tiny_run):
+    out, _ = tiny_run
+    before = (out / "trials.jsonl").read_bytes()
+    res = compare(*TINY, "--out", str(out), check=False, timeout=60)
+    assert res.returncode != 0 and "already holds a run" in res.stderr
+    assert (out / "trials.jsonl").read_bytes() == before
+
+
+def test_execute_runs_each_planners_plans_in_physics(tmp_path):
+    out = tmp_path / "exec"
+    res = compare("--planners", "rrt,trajopt", "--scenes", "1", "--cans", "1", "--variant", "open",
+                  "--no-progress", "--execute", "--out", str(out))
+    execs = json.loads((out / "execution.json").read_text())["executions"]
+    assert [e["planner"] for e in execs] == ["rrt", "trajopt"]
+    recs = records(out)
+    for e in execs:
+        # Executed only what the trials planned: a planner with a failed problem stops there.
+        planned = all(r["status"] == "success" for r in recs if r["planner"] == e["planner"])
+        assert e["cans_attempted"] == (1 if planned else 0)
+        assert e["cans_in_bin"] + e["cans_on_plate"] + e["cans_elsewhere"] == e["cans_total"] == 1
+        assert e["replay"] == f"replay_{e['planner']}.html" and (out / e["replay"]).stat().st_size > 100_000
+    assert "Execution in physics" in (out / "summary.md").read_text()
+    assert (out / "plots" / "execution.png").exists()
+    assert "Execution in physics" in res.stdout
