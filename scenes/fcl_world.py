@@ -40,225 +40,25 @@ from __future__ import annotations
 
 import itertools
 import math
-from typing import NamedTuple
 
 import fcl
 import numpy as np
 
+from scenes.fcl_shapes import G_INDEX, Part, cover_spheres
+from scenes.fcl_tables import APART, TABLE_MARGIN_M, TOUCHING, UNKNOWN, on_axis, pair_table
 from scenes.robot_model import RobotModel, load_robot
 from scenes.scene import HeldCan, Scene
 
 #: Bodies that form one rigid assembly with the gripper (Drake filters welded assemblies).
 GRIPPER_ASSEMBLY = frozenset({"iiwa_link_7", "body", "left_finger", "right_finger", "held_can"})
-G_INDEX = 8  # index of the gripper body in RobotModel.link_poses
 
 #: Spacing of the spheres covering a cylinder or capsule along its axis, as a fraction of its
 #: radius (outer radius sqrt(1 + f^2 / 4) r: 7% above r for f = 0.75), for pairs with the scene
 #: (fine: the scene is where most near misses happen) and between robot parts (coarse: few pairs).
 ENV_SPACING = 0.75
 SELF_SPACING = 2.0
-#: Cells of a self-pair table over its one joint.
-TABLE_CELLS = 1024
-#: A table cell is proved only if the pair's distance bound clears zero by this (FCL's own
-#: tolerance is far smaller).
-TABLE_MARGIN_M = 1e-4
 #: States per chunk in the batched checks (bounds memory; a colliding early chunk ends the scan).
 CHUNK = 64
-
-
-def _fcl_geometry(kind: str, dims) -> fcl.CollisionGeometry:
-    if kind == "box":
-        return fcl.Box(*dims)
-    if kind == "cylinder":
-        return fcl.Cylinder(dims[0], dims[1])
-    if kind == "capsule":
-        return fcl.Capsule(dims[0], dims[1])
-    if kind == "sphere":
-        return fcl.Sphere(dims[0])
-    raise ValueError(f"unsupported shape {kind!r}")
-
-
-def _cover_spheres(kind: str, dims, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Spheres covering a primitive: centres (k, 3) in the shape frame, outer and inner radii (k,).
-
-    The union of the outer spheres encloses the shape; each inner ball (same centre) lies inside
-    it. A capsule of radius r is covered by spheres of radius sqrt(r^2 + h^2) centred on its
-    segment at most 2h = spacing * r apart, end points included; a cylinder likewise by slices
-    of length 2h. A box is cut along its longest side into pieces no longer than spacing times
-    its middle side, each enclosed by its half-diagonal.
-    """
-    if kind == "sphere":
-        return np.zeros((1, 3)), np.array([dims[0]]), np.array([dims[0]])
-    if kind == "box":
-        size = np.asarray(dims, float)
-        ax = int(np.argmax(size))
-        mid = np.sort(size)[1]
-        k = max(1, math.ceil(size[ax] / (2 * spacing * mid)))
-        piece = size.copy()
-        piece[ax] /= k
-        t = -size[ax] / 2 + piece[ax] * (np.arange(k) + 0.5)
-        centres = np.zeros((k, 3))
-        centres[:, ax] = t
-        outer = np.full(k, 0.5 * float(np.linalg.norm(piece)))
-        others = [0.5 * size[i] for i in range(3) if i != ax]
-        inner = np.minimum(min(others), size[ax] / 2 - np.abs(t))
-        return centres, outer, inner
-    r, length = dims
-    k = max(1, math.ceil(length / (spacing * r)))
-    h = length / (2 * k)
-    if kind == "capsule":
-        z = np.linspace(-length / 2, length / 2, k + 1)
-        return np.column_stack([0 * z, 0 * z, z]), np.full(k + 1, math.hypot(r, h)), np.full(k + 1, r)
-    if kind == "cylinder":
-        z = -length / 2 + h + 2 * h * np.arange(k)
-        inner = np.minimum(r, length / 2 - np.abs(z))
-        return np.column_stack([0 * z, 0 * z, z]), np.full(k, math.hypot(r, h)), inner
-    raise ValueError(f"unsupported shape {kind!r}")
-
-
-def _bounding_radius(kind: str, dims) -> float:
-    """Radius of the smallest sphere about the shape's origin that encloses it."""
-    if kind == "box":
-        return 0.5 * math.sqrt(sum(d * d for d in dims))
-    if kind == "sphere":
-        return dims[0]
-    r, length = dims
-    return r + length / 2 if kind == "capsule" else math.hypot(r, length / 2)
-
-
-class _Prim(NamedTuple):
-    """A primitive fixed to chain link `link` (0..7) at pose X_LS."""
-
-    kind: str
-    dims: tuple
-    link: int
-    X_LS: np.ndarray
-
-
-class _Part:
-    """One collision primitive of the robot, riding on FK body `body` (0..8)."""
-
-    __slots__ = ("name", "body", "link", "kind", "dims", "X_BS", "X_LS", "obj", "geom")
-
-    def __init__(self, name: str, body: int, X_BS: np.ndarray, kind: str, dims, X_7G: np.ndarray):
-        self.name, self.body, self.X_BS, self.kind, self.dims = name, body, X_BS, kind, tuple(dims)
-        # The chain link it moves with (the gripper body is welded to link 7) and its pose there.
-        self.link = min(body, 7)
-        self.X_LS = X_7G @ X_BS if body == G_INDEX else X_BS
-        self.geom = _fcl_geometry(kind, dims)
-        self.obj = fcl.CollisionObject(self.geom, fcl.Transform())
-
-    @property
-    def prim(self) -> _Prim:
-        return _Prim(self.kind, self.dims, self.link, self.X_LS)
-
-
-#: Table cell values: not proved either way (ask FCL), proved apart, proved in collision.
-UNKNOWN, APART, TOUCHING = 0, 1, 2
-
-
-class _PairTable:
-    """One joint's range in cells, each UNKNOWN, APART or TOUCHING for a self pair."""
-
-    __slots__ = ("joint", "lower_rad", "cells_per_rad", "cells")
-
-    def __init__(self, joint: int, lower_rad: float, cells_per_rad: float, cells: bytearray):
-        self.joint, self.lower_rad, self.cells_per_rad, self.cells = joint, lower_rad, cells_per_rad, cells
-
-    @property
-    def always_apart(self) -> bool:
-        return all(c == APART for c in self.cells)
-
-
-_TABLES: dict[tuple, _PairTable | None] = {}
-
-
-def _on_axis(prim: _Prim, X_axis: np.ndarray) -> bool:
-    """True if the primitive is round about the z axis of frame X_axis (both in one link frame)."""
-    if prim.kind not in ("sphere", "cylinder", "capsule"):
-        return False
-    d, o = X_axis[:3, 2], X_axis[:3, 3]
-    off = prim.X_LS[:3, 3] - o
-    if np.linalg.norm(off - d * (off @ d)) > 1e-9:
-        return False
-    return prim.kind == "sphere" or abs(abs(prim.X_LS[:3, 2] @ d) - 1.0) < 1e-12
-
-
-def _revolved(prim: _Prim) -> _Prim:
-    """A cylinder about its link's z axis enclosing a box in every turn of that link's joint."""
-    corners = np.array(list(itertools.product(*[(-d / 2, d / 2) for d in prim.dims])))
-    c_L = corners @ prim.X_LS[:3, :3].T + prim.X_LS[:3, 3]
-    radius = float(np.max(np.hypot(c_L[:, 0], c_L[:, 1])))
-    z0, z1 = float(c_L[:, 2].min()), float(c_L[:, 2].max())
-    X = np.eye(4)
-    X[2, 3] = (z0 + z1) / 2
-    return _Prim("cylinder", (radius, z1 - z0), prim.link, X)
-
-
-def _pair_table(robot: RobotModel, a: _Prim, b: _Prim) -> _PairTable | None:
-    """A proved table for self pair (a, b), a on the lower link, over the one joint their
-    distance depends on, or None when it depends on more. Cached per process."""
-    chain = tuple((j.X_origin.tobytes(), j.lower_rad, j.upper_rad) for j in robot.joints)
-    key = (chain, a.kind, a.dims, a.link, a.X_LS.round(12).tobytes(), b.kind, b.dims, b.link, b.X_LS.round(12).tobytes())
-    if key in _TABLES:
-        return _TABLES[key]
-    joints = list(range(a.link, b.link))  # q indices of joints a.link + 1 .. b.link
-    if joints and _on_axis(a, robot.joints[joints[0]].X_origin):
-        joints = joints[1:]  # a is round about the first joint: its angle does not matter
-    enclosed = False
-    if joints and joints[-1] == b.link - 1 and not _on_axis(b, np.eye(4)) and len(joints) == 2 and b.kind == "box":
-        b, enclosed = _revolved(b), True  # bound b over its own joint's turn
-    if joints and joints[-1] == b.link - 1 and _on_axis(b, np.eye(4)):
-        joints = joints[:-1]
-    table = _build_table(robot, a, b, joints[0] if joints else -1) if len(joints) <= 1 else None
-    if table is not None and enclosed:  # the enclosure touching proves nothing about b itself
-        table.cells = bytearray(APART if c == APART else UNKNOWN for c in table.cells)
-    _TABLES[key] = table
-    return table
-
-
-def _build_table(robot: RobotModel, a: _Prim, b: _Prim, joint: int) -> _PairTable:
-    """Prove cells apart (or in collision) by the FCL signed distance at a run of cells' centre
-    minus (plus) a Lipschitz bound, halving runs only where unproved.
-
-    Turning joint `joint` by dq moves any point p of b by at most |dq| |p - o| (o, the origin of
-    the link it turns, lies on its axis); |p - o| is bounded by the joint offsets from o to b's
-    link plus b's reach from that link's origin.
-    """
-    req = fcl.DistanceRequest(enable_signed_distance=True)
-    oa = fcl.CollisionObject(_fcl_geometry(a.kind, a.dims), fcl.Transform())
-    ob = fcl.CollisionObject(_fcl_geometry(b.kind, b.dims), fcl.Transform())
-    q = np.zeros(7)
-
-    def dist(q_j: float) -> float:
-        if joint >= 0:
-            q[joint] = q_j
-        X = robot.link_poses(q)
-        Xa, Xb = X[a.link] @ a.X_LS, X[b.link] @ b.X_LS
-        oa.setTransform(fcl.Transform(Xa[:3, :3], Xa[:3, 3]))
-        ob.setTransform(fcl.Transform(Xb[:3, :3], Xb[:3, 3]))
-        return float(fcl.distance(oa, ob, req, fcl.DistanceResult()))
-
-    if joint < 0:
-        return _PairTable(-1, 0.0, 0.0, bytearray([APART if dist(0.0) > TABLE_MARGIN_M else UNKNOWN]))
-    reach = float(np.linalg.norm(b.X_LS[:3, 3])) + _bounding_radius(b.kind, b.dims)
-    rho = reach + sum(float(np.linalg.norm(robot.joints[m].X_origin[:3, 3])) for m in range(joint + 1, b.link))
-    n = TABLE_CELLS
-    lo = robot.joints[joint].lower_rad
-    step = (robot.joints[joint].upper_rad - lo) / n
-    cells = bytearray(n)
-    stack = [(0, n)]
-    while stack:
-        i0, i1 = stack.pop()
-        d = dist(lo + (i0 + i1) / 2 * step)
-        bound = rho * (i1 - i0) / 2 * step
-        if d - bound > TABLE_MARGIN_M:
-            cells[i0:i1] = bytes([APART]) * (i1 - i0)
-        elif d + bound < -TABLE_MARGIN_M:
-            cells[i0:i1] = bytes([TOUCHING]) * (i1 - i0)
-        elif i1 - i0 > 1:  # else one unproved cell
-            stack += [(i0, (i0 + i1) // 2), ((i0 + i1) // 2, i1)]
-    return _PairTable(joint, lo, 1.0 / step, cells)
 
 
 class CollisionWorld:
@@ -290,17 +90,17 @@ class CollisionWorld:
         finger_X = robot.finger_offsets(opening)
 
         # --- robot parts (every part rides on one of the 9 FK bodies) ---
-        parts: list[_Part] = []
+        parts: list[Part] = []
         for sh in robot.shapes:
             if sh.body in finger_X:
                 body, X_BS = G_INDEX, finger_X[sh.body] @ sh.X_BS
             else:
                 body, X_BS = robot.body_index(sh.body), sh.X_BS
-            parts.append(_Part(sh.body, body, X_BS, sh.kind, sh.dims, robot.X_7G))
+            parts.append(Part(sh.body, body, X_BS, sh.kind, sh.dims, robot.X_7G))
         if held is not None:
             m = spec.grasp.held_margin_m
             can_dims = (spec.can.radius_m + m, spec.can.height_m + 2 * m)
-            parts.append(_Part("held_can", G_INDEX, held.X_GC, "cylinder", can_dims, robot.X_7G))
+            parts.append(Part("held_can", G_INDEX, held.X_GC, "cylinder", can_dims, robot.X_7G))
         self.parts = parts
         self._req = fcl.CollisionRequest()
         self._dreq = fcl.DistanceRequest(enable_signed_distance=True)
@@ -354,10 +154,10 @@ class CollisionWorld:
 
     # --- construction -----------------------------------------------------------------------------
 
-    def _never_reaches(self, part: _Part, obstacle: fcl.CollisionObject) -> bool:
+    def _never_reaches(self, part: Part, obstacle: fcl.CollisionObject) -> bool:
         """True if a part round about joint 1's axis (so the same set in space for every q1, e.g.
         link 1's capsule) is apart from the obstacle: the pair can be left out."""
-        if part.link != 1 or not _on_axis(part.prim, self.robot.joints[0].X_origin):
+        if part.link != 1 or not on_axis(part.prim, self.robot.joints[0].X_origin):
             return False
         X = self.robot.link_poses(np.zeros(7))[1] @ part.X_LS
         part.obj.setTransform(fcl.Transform(X[:3, :3], X[:3, 3]))
@@ -379,7 +179,7 @@ class CollisionWorld:
                 self._frame_row[p] = len(rows)
                 rows.extend(part.X_LS.T)  # R[:, 0], R[:, 1], R[:, 2] (w = 0) and p (w = 1)
                 for use, spacing in (("env", ENV_SPACING), ("self", SELF_SPACING)):
-                    c, outer, inner = _cover_spheres(part.kind, part.dims, spacing)
+                    c, outer, inner = cover_spheres(part.kind, part.dims, spacing)
                     c_L = c @ part.X_LS[:3, :3].T + part.X_LS[:3, 3]
                     self._spheres[use][p] = (np.arange(len(rows), len(rows) + len(c)), outer, inner)
                     rows.extend(np.column_stack([c_L, np.ones(len(c))]))
@@ -426,7 +226,7 @@ class CollisionWorld:
             a, b = self.parts[i], self.parts[j]
             if a.link > b.link:
                 i, j, a, b = j, i, b, a
-            table = None if "held_can" in (a.name, b.name) else _pair_table(self.robot, a.prim, b.prim)
+            table = None if "held_can" in (a.name, b.name) else pair_table(self.robot, a.prim, b.prim)
             if table is not None and table.always_apart:
                 continue  # they never touch within the joint limits
             k = new_pair(i, (j, None))

@@ -8,7 +8,7 @@ import fcl
 import numpy as np
 import pytest
 
-from scenes import fcl_world
+from scenes import fcl_shapes, fcl_tables, fcl_world
 from scenes.fcl_world import CollisionWorld
 from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp
@@ -147,23 +147,23 @@ def test_joint_tables_are_sound():
     assert world._tables, "the wrist pairs should have tables"
     Q = world.robot.random_configurations(np.random.default_rng(103), 1500)
     req = fcl.DistanceRequest(enable_signed_distance=True)
-    decided = {fcl_world.APART: 0, fcl_world.TOUCHING: 0}
+    decided = {fcl_tables.APART: 0, fcl_tables.TOUCHING: 0}
     for q in Q:
         ql = q.tolist()
         rows = world._state_rows(q)
         for j, lo, inv, n, cells, k in world._tables:
             x = (ql[j] - lo) * inv
-            c = cells[int(x)] if 0.0 <= x < n else fcl_world.UNKNOWN
-            if c == fcl_world.UNKNOWN:
+            c = cells[int(x)] if 0.0 <= x < n else fcl_tables.UNKNOWN
+            if c == fcl_tables.UNKNOWN:
                 continue
             a = world._place(world._pp_part[k], rows)
             b = world._place(world._pp_other[k][0], rows)
-            if c == fcl_world.APART:
+            if c == fcl_tables.APART:
                 assert fcl.distance(a, b, req, fcl.DistanceResult()) > 0
             else:
                 assert fcl.collide(a, b, fcl.CollisionRequest(), fcl.CollisionResult())
             decided[c] += 1
-    assert decided[fcl_world.APART] > len(Q) and decided[fcl_world.TOUCHING] > 20
+    assert decided[fcl_tables.APART] > len(Q) and decided[fcl_tables.TOUCHING] > 20
 
 
 @pytest.mark.parametrize("kind,dims", [("box", (0.146, 0.0725, 0.05)), ("box", (0.012, 0.082, 0.02)),
@@ -171,7 +171,7 @@ def test_joint_tables_are_sound():
                                        ("cylinder", (0.033, 0.122)), ("sphere", (0.05,))])
 @pytest.mark.parametrize("spacing", [fcl_world.ENV_SPACING, fcl_world.SELF_SPACING])
 def test_cover_spheres_enclose_and_inner_balls_lie_inside(kind, dims, spacing):
-    centres, outer, inner = fcl_world._cover_spheres(kind, dims, spacing)
+    centres, outer, inner = fcl_shapes.cover_spheres(kind, dims, spacing)
     rng = np.random.default_rng(104)
 
     def inside(p):  # points (N, 3) in the shape frame
