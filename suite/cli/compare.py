@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime as dt
-import math
 import sys
 import time
 from pathlib import Path
@@ -62,14 +61,29 @@ def _config_file(path: str) -> dict:
     return raw
 
 
+def _validated(values: dict, *, source: str) -> CompareConfig:
+    """The settings checked against CompareConfig's annotations: one line per bad value."""
+    import pydantic
+
+    try:
+        return pydantic.TypeAdapter(CompareConfig).validate_python(values)
+    except pydantic.ValidationError as exc:
+        err = exc.errors(include_url=False)[0]
+        field = ".".join(str(x) for x in err["loc"]) or "settings"
+        msg = err["msg"][0].lower() + err["msg"][1:]
+        raise SuiteError(f"{source}{field} = {err['input']!r}: {msg}") from None
+
+
 def resolve_config(args: argparse.Namespace) -> CompareConfig:
     """Defaults < --config file < flags; every value checked before any trial runs."""
     from planners.registry import parse_planner_list
     from scenes.spec import available_variants
 
     values = dataclasses.asdict(CompareConfig())
+    source = ""
     if args.config:
         values.update(_config_file(args.config))
+        source = f"--config {args.config}: "
     for key in ("variant", "seed", "scenes", "cans", "grasps", "time_limit_s", "jobs", "spec", "executor", "scheduler"):
         v = getattr(args, key)
         if v is not None:
@@ -78,28 +92,13 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     if isinstance(planners, (list, tuple)):
         planners = ",".join(str(p) for p in planners)
     values["planners"] = tuple(parse_planner_list(str(planners)))
-    for key in ("scenes", "cans", "jobs"):
-        v = values[key]
-        if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-            raise SuiteError(f"{key} must be a positive integer, got {v!r}")
-    if isinstance(values["seed"], bool) or not isinstance(values["seed"], int) or values["seed"] < 0:
-        raise SuiteError(f"seed must be an integer >= 0, got {values['seed']!r}")
-    t = values["time_limit_s"]
-    if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t <= 0:
-        raise SuiteError(f"time_limit_s must be a finite number > 0, got {t!r}")
-    if values["grasps"] not in ("perceived", "truth"):
-        raise SuiteError(f"grasps must be 'perceived' or 'truth', got {values['grasps']!r}")
-    variants = available_variants(values["spec"])
-    if values["variant"] not in variants:
-        raise SuiteError(f"unknown variant {values['variant']!r}; allowed: {variants}")
-    if values["executor"] not in ("local", "dask"):
-        raise SuiteError(f"executor must be 'local' or 'dask', got {values['executor']!r}")
-    g = values["hard_limit_grace_s"]
-    if isinstance(g, bool) or not isinstance(g, (int, float)) or not math.isfinite(g) or g <= 0:
-        raise SuiteError(f"hard_limit_grace_s must be a finite number > 0, got {g!r}")
-    if not isinstance(values["planner_configs"], dict):
-        raise SuiteError("planner_configs must map planner names to settings")
-    return CompareConfig(**{**values, "time_limit_s": float(t)})
+    if isinstance(values["time_limit_s"], int) and not isinstance(values["time_limit_s"], bool):
+        values["time_limit_s"] = float(values["time_limit_s"])
+    config = _validated(values, source=source)
+    variants = available_variants(config.spec)
+    if config.variant not in variants:
+        raise SuiteError(f"unknown variant {config.variant!r}; allowed: {variants}")
+    return config
 
 
 def prepare_out(args: argparse.Namespace) -> Path:

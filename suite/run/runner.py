@@ -16,7 +16,9 @@ import platform
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
+
+from pydantic import Field
 
 from scenes.errors import SuiteError
 from suite.run.trial import TrialSpec, config_dict, make_config, make_trial, run_trial
@@ -32,21 +34,25 @@ HARD_LIMIT_FACTOR = 3.0
 
 @dataclasses.dataclass(frozen=True)
 class CompareConfig:
-    """The settings of a comparison run (CLI flags or a YAML file)."""
+    """The settings of a comparison run (CLI flags or a YAML file).
+
+    The annotations are the allowed values: `suite.cli.compare` validates every source against
+    them with pydantic before any work starts (numbers strictly: no "3" -> 3, no true -> 1).
+    """
 
     planners: tuple[str, ...] = ("ik", "rrt", "trajopt")
     variant: str = "wall"
-    seed: int = 0
-    scenes: int = 4
-    cans: int = 3
-    grasps: str = "truth"
-    time_limit_s: float = 5.0
-    jobs: int = 2
+    seed: Annotated[int, Field(ge=0, strict=True)] = 0
+    scenes: Annotated[int, Field(gt=0, strict=True)] = 4
+    cans: Annotated[int, Field(gt=0, strict=True)] = 3
+    grasps: Literal["perceived", "truth"] = "truth"
+    time_limit_s: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)] = 5.0
+    jobs: Annotated[int, Field(gt=0, strict=True)] = 2
     spec: str | None = None
     planner_configs: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
-    executor: str = "local"
+    executor: Literal["local", "dask"] = "local"
     scheduler: str | None = None
-    hard_limit_grace_s: float = HARD_LIMIT_GRACE_S
+    hard_limit_grace_s: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)] = HARD_LIMIT_GRACE_S
 
 
 def worker_init() -> None:
