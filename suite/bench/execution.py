@@ -2,7 +2,7 @@
 
 For each variant and grasp source, every planner plans and executes `--scenes` generated scenes
 of `--cans` cans (one job per planner and scene, planned in the job's own process). Printed per
-planner (`suite.report.summary.execution_table`, as in a run's summary): cans in the bin over all scenes,
+planner (`suite.report.summary_execution.execution_table`, as in a run's summary): cans in the bin over all scenes,
 and among the scenes whose every problem was planned (the figure that judges execution), where
 the others ended, unintended contacts, tracking, slip, and the simulation's real-time factor
 (simulated / wall time of the simulation alone; one job per core).
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"executions": records}, f, indent=1)
-    from suite.report.summary import execution_table
+    from suite.report.summary_execution import execution_table
 
     for variant in variants:
         for grasps in grasp_modes:

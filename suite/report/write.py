@@ -27,7 +27,8 @@ def write_report(run_dir: str | Path, *, plots: bool = True, seed: int = 0) -> s
     """
     from suite.report.arena import write_arena_logs
     from suite.run.records import planners_in, read_manifest, read_trials
-    from suite.report.summary import summary_table, write_summary
+    from suite.report.summary import write_summary
+    from suite.report.summary_tables import summary_table
 
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
@@ -37,7 +38,7 @@ def write_report(run_dir: str | Path, *, plots: bool = True, seed: int = 0) -> s
     records = read_trials(run_dir / TRIALS_FILE)
     planners = planners_in(records, read_manifest(run_dir))
     from suite.execution.jobs import read_execution
-    from suite.report.summary import execution_table
+    from suite.report.summary_execution import execution_table
 
     executions = read_execution(run_dir)
     written = write_summary(run_dir, records, planners=planners, seed=seed, executions=executions)

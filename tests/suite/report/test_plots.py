@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 from synthetic_runs import synthetic_records, write_run
 
-from suite.report.plots import BUILTIN_COLORS, densify_joint_path, make_plots, planner_colors
+from suite.report.plots import make_plots
+from suite.report.plots_common import BUILTIN_COLORS, planner_colors
+from suite.report.plots_paths import densify_joint_path
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -11,14 +11,9 @@ import pytest
 
 from scenes.errors import SuiteError
 from suite.run.records import metric, planners_in, problem_key, read_trials
-from suite.report.summary import (
-    bootstrap_median_ci,
-    paired_comparisons,
-    summarize,
-    summary_table,
-    wilcoxon_p,
-    write_summary,
-)
+from suite.report.summary import write_summary
+from suite.report.summary_stats import bootstrap_median_ci, paired_comparisons, summarize, wilcoxon_p
+from suite.report.summary_tables import summary_table
 
 Q0 = np.array([-1.57, 0.1, 0.0, -1.2, 0.0, 1.6, 0.0])
 U = np.array([1.0, 2.0, 0.0, -2.0, 0.0, 0.0, 4.0]) / 5.0  # a unit direction in joint space
