@@ -1,48 +1,42 @@
 """OMPL sampling-based planners in joint space: `rrt` (RRT-Connect), `rrtstar`, `bitstar`, `aorrtc`, `prm`.
 
-The state space is the arm's 7 joints (RealVectorStateSpace with the joint limits). States and
-motions are checked by the problem's python-fcl world (`planners.worlds.collision_world`): a state by
-`is_free`, a straight motion by two batched `first_collision` queries over samples at most
-`resolution_rad` apart in every joint, the end state and coarse samples first so that a blocked
-motion is rejected after few exact checks. The solution is shortened by OMPL's PathSimplifier
-(by default its deterministic rope shortcut; optionally its randomized `simplify` under a time
-budget) and, if it was planned at a coarser resolution, re-checked at the validator's (0.01 rad)
-and planned again at that resolution if it fails. Only an exact solution counts.
+Each plans on the arm's 7 joints with states and motions checked by the problem's python-fcl world
+(`planners.ompl_adapter`: the state space, batched motion checks, per-trial seeding). The solution
+is shortened by OMPL's PathSimplifier (by default its deterministic rope shortcut; optionally its
+randomized `simplify` under a time budget) and, if it was planned at a coarser resolution,
+re-checked at the validator's (0.01 rad) and planned again at that resolution if it fails. Only an
+exact solution counts.
 
-Randomness: OMPL draws every RNG's seed from one process-global seed generator. A trial restarts
-that generator at a seed derived from `problem.seed` and the problem's identity before it creates
-any OMPL object, so all of the trial's OMPL randomness (RRT-Connect's StateSampler, the
-simplifier's shortcuts, the nearest-neighbour structures) depends on that seed alone, not on the
-trials the process ran before. (A custom sampler cannot do this for RRT-Connect: it draws from
-`StateSpace::allocStateSampler`, whose allocator the Python bindings do not expose, and the
-simplifier has its own RNG.) Only `rrt` stops at its first solution, so only its path is
-reproducible; the optimizing planners run until their time budget and their result depends on
-how far they get.
+A trial's OMPL randomness depends on its seed alone (see `planners.ompl_adapter`). Only `rrt`
+stops at its first solution, so only its path is reproducible; the optimizing planners run until
+their time budget and their result depends on how far they get.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import logging
-import math
 import time
 from typing import Any, ClassVar
 
 import numpy as np
 from ompl import base as ob
 from ompl import geometric as og
-from ompl import util as ou
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
-from scenes.errors import SuiteError
+from planners.ompl_adapter import (
+    OmplProblem,
+    drop_collinear,
+    path_array,
+    reseed_ompl,
+    set_ompl_log_level,
+    trial_seed,
+)
 from planners.worlds import collision_world
+from scenes.errors import SuiteError
 
 log = logging.getLogger(__name__)
 
-DOF = 7
-#: How many samples of a motion (end state and coarsest first) go into the first batched query.
-COARSE_BATCH = 8
 SIMPLIFIERS = ("rope", "full", "rope+full")
 
 
@@ -160,106 +154,6 @@ class PRMConfig(OmplConfig):
     max_nearest_neighbors: int = 10
 
 
-# --- OMPL process state ----------------------------------------------------------------------------
-
-
-def _set_ompl_log_level(verbose: bool) -> None:
-    ou.setLogLevel(ou.LOG_INFO if verbose else ou.LOG_WARN)
-
-
-def _reseed_ompl(seed: int) -> None:
-    """Restart OMPL's process-global seed generator at `seed` (1 <= seed < 2**32).
-
-    `RNG::setSeed` reseeds the generator that seeds every RNG created afterwards, also after the
-    first RNG exists (OMPL's src/ompl/util/src/RandomNumbers.cpp); it then logs an error because
-    RNGs created before keep their streams. Every OMPL object of a trial is created after this
-    call, so that message does not apply here and is held back.
-    """
-    level = ou.getLogLevel()
-    ou.setLogLevel(ou.LOG_NONE)
-    try:
-        ou.RNG.setSeed(int(seed))
-    finally:
-        ou.setLogLevel(level)
-
-
-def trial_seed(problem: PlanningProblem) -> int:
-    """The OMPL seed (1 <= seed < 2**32) of a problem: its `seed` combined with its identity
-    (world, kind, can, start and goal configurations)."""
-    ident = repr((problem.world_key(), problem.kind, problem.can_id)).encode()
-    ident += np.asarray(problem.q_start, float).tobytes()
-    ident += b"" if problem.q_goal is None else np.asarray(problem.q_goal, float).tobytes()
-    words = np.frombuffer(ident + b"\0" * (-len(ident) % 4), dtype=np.uint32)
-    state = np.random.SeedSequence([int(problem.seed) & 0xFFFFFFFF, *words.tolist()]).generate_state(1)
-    return int(state[0]) or 1
-
-
-# --- collision checking ----------------------------------------------------------------------------
-
-
-@functools.lru_cache(maxsize=4096)
-def _check_order(n: int) -> np.ndarray:
-    """Sample indices 1..n of a motion in checking order: the end state n, then the others
-    coarsest first (by the power of two dividing them), so a blocked motion fails early."""
-    i = np.arange(1, n)
-    ctz = np.zeros(len(i), int)
-    m = i.copy()
-    while np.any(m % 2 == 0):
-        even = m % 2 == 0
-        ctz[even] += 1
-        m[even] //= 2
-    order = i[np.lexsort((i, -ctz))]
-    return np.concatenate([[n], order])
-
-
-def motion_samples(q0: np.ndarray, q1: np.ndarray, resolution_rad: float) -> np.ndarray:
-    """Samples of the straight motion q0 -> q1 (q0 excluded, q1 first), at most `resolution_rad`
-    apart in every joint, in checking order."""
-    d = q1 - q0
-    n = max(1, math.ceil(float(np.max(np.abs(d))) / resolution_rad))
-    t = _check_order(n) / n
-    return q0 + t[:, None] * d
-
-
-class _BatchMotionValidator(ob.MotionValidator):
-    """Checks a straight motion with batched python-fcl queries instead of one callback per state.
-
-    The start state is taken as valid (as OMPL's DiscreteMotionValidator does).
-    """
-
-    def __init__(self, si: ob.SpaceInformation, world, resolution_rad: float) -> None:
-        super().__init__(si)
-        self.world = world
-        self.resolution_rad = resolution_rad
-        self.motions = 0
-
-    def checkMotion(self, s1, s2) -> bool:  # noqa: N802 (OMPL's name)
-        self.motions += 1
-        Q = motion_samples(np.array(s1[0:DOF]), np.array(s2[0:DOF]), self.resolution_rad)
-        head = Q[:COARSE_BATCH]
-        if self.world.first_collision(head) >= 0:
-            return False
-        return len(Q) <= COARSE_BATCH or self.world.first_collision(Q[COARSE_BATCH:]) < 0
-
-
-def drop_collinear(Q: np.ndarray, *, tol_rad: float = 1e-9) -> np.ndarray:
-    """The waypoints without those that lie on the straight segment between their neighbours
-    (the rope shortcut leaves such states on straight stretches): the same motion."""
-    keep = [0]
-    for i in range(1, len(Q) - 1):
-        a, b, c = Q[keep[-1]], Q[i], Q[i + 1]
-        ac = c - a
-        t = float(np.dot(b - a, ac) / max(float(np.dot(ac, ac)), 1e-300))
-        if not (0.0 <= t <= 1.0 and float(np.max(np.abs(a + t * ac - b))) <= tol_rad):
-            keep.append(i)
-    keep.append(len(Q) - 1)
-    return Q[keep]
-
-
-def _path_array(path: og.PathGeometric) -> np.ndarray:
-    return np.array([s[0:DOF] for s in path.getStates()], float).reshape(-1, DOF)
-
-
 # --- the planners ----------------------------------------------------------------------------------
 
 
@@ -296,7 +190,7 @@ class _OmplPlanner:
             without an exact solution; NO_SOLUTION if the planner stopped without one.
         """
         cfg = self.config
-        _set_ompl_log_level(cfg.verbose)
+        set_ompl_log_level(cfg.verbose)
         world = collision_world(problem)
         checks0 = world.checks
         bad = check_endpoints(problem, world)
@@ -332,49 +226,28 @@ class _OmplPlanner:
                  seed: int) -> PlanResult:
         """One OMPL solve + simplification; every OMPL object lives only inside this call."""
         cfg = self.config
-        _reseed_ompl(seed)
+        reseed_ompl(seed)
         simplify_budget_s = min(cfg.simplify_time_s, 0.5 * budget_s)
         solve_budget_s = budget_s - simplify_budget_s
-        lo, hi = world.robot.lower_rad, world.robot.upper_rad
-
-        space = ob.RealVectorStateSpace(DOF)
-        bounds = ob.RealVectorBounds(DOF)
-        for i in range(DOF):
-            bounds.setLow(i, float(lo[i]))
-            bounds.setHigh(i, float(hi[i]))
-        space.setBounds(bounds)
-        si = ob.SpaceInformation(space)
-        si.setStateValidityChecker(lambda s: world.is_free(np.array(s[0:DOF])))
-        validator = _BatchMotionValidator(si, world, resolution_rad)
-        si.setMotionValidator(validator)
-        si.setup()
-        start, goal = si.allocState(), si.allocState()  # freed by their owners when released
-        start[0:DOF] = [float(v) for v in problem.q_start]
-        goal[0:DOF] = [float(v) for v in problem.q_goal]
-        pdef = ob.ProblemDefinition(si)
-        pdef.setStartAndGoalStates(start, goal)
-        objective = ob.PathLengthOptimizationObjective(si) if self.optimizing else None
-        if objective is not None:
-            pdef.setOptimizationObjective(objective)
-        planner = self._make(si)
-        planner.setProblemDefinition(pdef)
-        planner.setup()
+        op = OmplProblem(world, problem.q_start, problem.q_goal, resolution_rad=resolution_rad,
+                         optimizing=self.optimizing)
+        op.attach(self._make(op.si))
         stats: dict[str, Any] = {"solver": self.solver, "resolution_rad": resolution_rad}
         path = simplifier = None
         try:
             t_solve = time.perf_counter()
-            status = planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
+            status = op.planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
             solve_time_s = time.perf_counter() - t_solve
             code = status.getStatus()
             T = ob.PlannerStatus.PlannerStatusType
             stats.update(solve_time_s=solve_time_s, solver_status=status.asString(),
-                         motion_checks=validator.motions, **self._planner_stats(planner))
+                         motion_checks=op.validator.motions, **self._planner_stats(op.planner))
             if self.graph_stats:
-                data = ob.PlannerData(si)
-                planner.getPlannerData(data)
+                data = ob.PlannerData(op.si)
+                op.planner.getPlannerData(data)
                 stats["graph_vertices"] = data.numVertices()
                 del data
-            if code != T.EXACT_SOLUTION or not pdef.hasExactSolution():
+            if code != T.EXACT_SOLUTION or not op.pdef.hasExactSolution():
                 out_of_time = solve_time_s >= solve_budget_s * 0.999
                 if code in (T.TIMEOUT, T.APPROXIMATE_SOLUTION) and out_of_time:
                     return PlanResult(PlanStatus.TIMEOUT, None, stats)
@@ -382,14 +255,14 @@ class _OmplPlanner:
                     return PlanResult(PlanStatus.ERROR, None, stats)
                 return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
 
-            path = og.PathGeometric(pdef.getSolutionPath())
+            path = og.PathGeometric(op.pdef.getSolutionPath())
             stats["length_before_rad"] = path.length()
             stats["waypoints_before"] = path.getStateCount()
-            if objective is not None:
-                stats["best_cost"] = path.cost(objective).value()
+            if op.objective is not None:
+                stats["best_cost"] = path.cost(op.objective).value()
             t_simp = time.perf_counter()
             if simplify_budget_s > 0:
-                simplifier = og.PathSimplifier(si)
+                simplifier = og.PathSimplifier(op.si)
                 if cfg.simplifier in ("rope", "rope+full"):
                     simplifier.ropeShortcutPath(path, cfg.rope_delta_rad)
                 left_s = simplify_budget_s - (time.perf_counter() - t_simp)
@@ -397,16 +270,14 @@ class _OmplPlanner:
                     simplifier.simplify(path, ob.timedPlannerTerminationCondition(left_s))
             stats["simplify_time_s"] = time.perf_counter() - t_simp
             stats["length_after_rad"] = path.length()
-            stats["motion_checks"] = validator.motions
-            Q = drop_collinear(_path_array(path))
+            stats["motion_checks"] = op.validator.motions
+            Q = drop_collinear(path_array(path))
             stats["waypoints"] = len(Q)
         finally:
             # Release in dependency order: paths and simplifier, the planner's data and problem,
             # then the problem definition, the space information and the space.
             del path, simplifier
-            planner.clear()
-            pdef.clearSolutionPaths()
-            del planner, objective, pdef, start, goal, validator, si, space, bounds
+            op.release()
 
         # The path runs between the very start and goal states; snap away float noise, if any.
         for end, q in ((0, problem.q_start), (-1, problem.q_goal)):

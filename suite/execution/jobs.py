@@ -20,14 +20,10 @@ import numpy as np
 
 from planners.base import PROBLEM_KINDS, PlanningProblem
 from scenes.scene import CanPose, Scene
-from suite.execution.simulate import (
-    ExecutionConfig,
-    WorldState,
-    execute_cycles,
-    planned_ahead,
-    timed_cycle,
-    where,
-)
+from suite.execution.commands import WorldState, planned_ahead, timed_cycle
+from suite.execution.monitor import where
+from suite.execution.plant import ExecutionConfig
+from suite.execution.simulate import execute_cycles
 
 log = logging.getLogger(__name__)
 

@@ -11,13 +11,8 @@ import numpy as np
 import pytest
 
 from planners.base import PlanStatus
-from planners.ompl_rrt import (
-    AORRTCConfig,
-    RRTConnectConfig,
-    drop_collinear,
-    motion_samples,
-    trial_seed,
-)
+from planners.ompl_adapter import drop_collinear, motion_samples, trial_seed
+from planners.ompl_rrt import AORRTCConfig, RRTConnectConfig
 from planners.registry import make_planner
 from scenes.grasp_rule import truth_grasp
 from scenes.errors import SuiteError

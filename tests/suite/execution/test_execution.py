@@ -11,7 +11,8 @@ from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp
 from scenes.spec import load_spec
 from suite.execution.jobs import ExecutionJob, can_pose_from, plan_cans, _open_loop
-from suite.execution.simulate import bin_region, execute_cycles, where
+from suite.execution.monitor import bin_region, where
+from suite.execution.simulate import execute_cycles
 from suite.problems.cycle import build_problems
 from suite.run.trial import config_dict, make_config
 

@@ -1,0 +1,191 @@
+"""The OMPL side of the joint-space planners: state space, python-fcl motion checks, seeding, path conversion.
+
+The state space is the arm's 7 joints (RealVectorStateSpace with the joint limits). States and
+motions are checked by the problem's python-fcl world (`planners.worlds.collision_world`): a state by
+`is_free`, a straight motion by two batched `first_collision` queries over samples at most
+`resolution_rad` apart in every joint, the end state and coarse samples first so that a blocked
+motion is rejected after few exact checks. `OmplProblem` creates every OMPL object of one solve
+and releases them in dependency order.
+
+Randomness: OMPL draws every RNG's seed from one process-global seed generator. A trial restarts
+that generator at a seed derived from `problem.seed` and the problem's identity before it creates
+any OMPL object, so all of the trial's OMPL randomness (RRT-Connect's StateSampler, the
+simplifier's shortcuts, the nearest-neighbour structures) depends on that seed alone, not on the
+trials the process ran before. (A custom sampler cannot do this for RRT-Connect: it draws from
+`StateSpace::allocStateSampler`, whose allocator the Python bindings do not expose, and the
+simplifier has its own RNG.)
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from ompl import base as ob
+from ompl import geometric as og
+from ompl import util as ou
+
+from planners.base import PlanningProblem
+
+DOF = 7
+#: How many samples of a motion (end state and coarsest first) go into the first batched query.
+COARSE_BATCH = 8
+
+
+# --- OMPL process state ----------------------------------------------------------------------------
+
+
+def set_ompl_log_level(verbose: bool) -> None:
+    ou.setLogLevel(ou.LOG_INFO if verbose else ou.LOG_WARN)
+
+
+def reseed_ompl(seed: int) -> None:
+    """Restart OMPL's process-global seed generator at `seed` (1 <= seed < 2**32).
+
+    `RNG::setSeed` reseeds the generator that seeds every RNG created afterwards, also after the
+    first RNG exists (OMPL's src/ompl/util/src/RandomNumbers.cpp); it then logs an error because
+    RNGs created before keep their streams. Every OMPL object of a trial is created after this
+    call, so that message does not apply here and is held back.
+    """
+    level = ou.getLogLevel()
+    ou.setLogLevel(ou.LOG_NONE)
+    try:
+        ou.RNG.setSeed(int(seed))
+    finally:
+        ou.setLogLevel(level)
+
+
+def trial_seed(problem: PlanningProblem) -> int:
+    """The OMPL seed (1 <= seed < 2**32) of a problem: its `seed` combined with its identity
+    (world, kind, can, start and goal configurations)."""
+    ident = repr((problem.world_key(), problem.kind, problem.can_id)).encode()
+    ident += np.asarray(problem.q_start, float).tobytes()
+    ident += b"" if problem.q_goal is None else np.asarray(problem.q_goal, float).tobytes()
+    words = np.frombuffer(ident + b"\0" * (-len(ident) % 4), dtype=np.uint32)
+    state = np.random.SeedSequence([int(problem.seed) & 0xFFFFFFFF, *words.tolist()]).generate_state(1)
+    return int(state[0]) or 1
+
+
+# --- collision checking ----------------------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=4096)
+def _check_order(n: int) -> np.ndarray:
+    """Sample indices 1..n of a motion in checking order: the end state n, then the others
+    coarsest first (by the power of two dividing them), so a blocked motion fails early."""
+    i = np.arange(1, n)
+    ctz = np.zeros(len(i), int)
+    m = i.copy()
+    while np.any(m % 2 == 0):
+        even = m % 2 == 0
+        ctz[even] += 1
+        m[even] //= 2
+    order = i[np.lexsort((i, -ctz))]
+    return np.concatenate([[n], order])
+
+
+def motion_samples(q0: np.ndarray, q1: np.ndarray, resolution_rad: float) -> np.ndarray:
+    """Samples of the straight motion q0 -> q1 (q0 excluded, q1 first), at most `resolution_rad`
+    apart in every joint, in checking order."""
+    d = q1 - q0
+    n = max(1, math.ceil(float(np.max(np.abs(d))) / resolution_rad))
+    t = _check_order(n) / n
+    return q0 + t[:, None] * d
+
+
+class BatchMotionValidator(ob.MotionValidator):
+    """Checks a straight motion with batched python-fcl queries instead of one callback per state.
+
+    The start state is taken as valid (as OMPL's DiscreteMotionValidator does).
+    """
+
+    def __init__(self, si: ob.SpaceInformation, world, resolution_rad: float) -> None:
+        super().__init__(si)
+        self.world = world
+        self.resolution_rad = resolution_rad
+        self.motions = 0
+
+    def checkMotion(self, s1, s2) -> bool:  # OMPL's name
+        self.motions += 1
+        Q = motion_samples(np.array(s1[0:DOF]), np.array(s2[0:DOF]), self.resolution_rad)
+        head = Q[:COARSE_BATCH]
+        if self.world.first_collision(head) >= 0:
+            return False
+        return len(Q) <= COARSE_BATCH or self.world.first_collision(Q[COARSE_BATCH:]) < 0
+
+
+# --- the OMPL objects of one solve -----------------------------------------------------------------
+
+
+class OmplProblem:
+    """Every OMPL object of one solve: the joint space with the world's checks, the start and goal
+    states, the problem definition (with the path-length objective if `optimizing`) and, once
+    `attach`ed, the planner. `release` frees them in dependency order.
+
+    Attributes:
+        space, bounds, si: the state space, its joint limits and its space information.
+        validator: the motion validator (its `motions` counts the motions checked).
+        start, goal: the allocated start and goal states.
+        pdef: the problem definition; objective: its optimization objective or None.
+        planner: the attached planner, or None.
+    """
+
+    def __init__(self, world, q_start: np.ndarray, q_goal: np.ndarray, *, resolution_rad: float,
+                 optimizing: bool) -> None:
+        lo, hi = world.robot.lower_rad, world.robot.upper_rad
+        self.space = ob.RealVectorStateSpace(DOF)
+        self.bounds = ob.RealVectorBounds(DOF)
+        for i in range(DOF):
+            self.bounds.setLow(i, float(lo[i]))
+            self.bounds.setHigh(i, float(hi[i]))
+        self.space.setBounds(self.bounds)
+        self.si = ob.SpaceInformation(self.space)
+        self.si.setStateValidityChecker(lambda s: world.is_free(np.array(s[0:DOF])))
+        self.validator = BatchMotionValidator(self.si, world, resolution_rad)
+        self.si.setMotionValidator(self.validator)
+        self.si.setup()
+        self.start, self.goal = self.si.allocState(), self.si.allocState()  # freed by their owners when released
+        self.start[0:DOF] = [float(v) for v in q_start]
+        self.goal[0:DOF] = [float(v) for v in q_goal]
+        self.pdef = ob.ProblemDefinition(self.si)
+        self.pdef.setStartAndGoalStates(self.start, self.goal)
+        self.objective = ob.PathLengthOptimizationObjective(self.si) if optimizing else None
+        if self.objective is not None:
+            self.pdef.setOptimizationObjective(self.objective)
+        self.planner: ob.Planner | None = None
+
+    def attach(self, planner: ob.Planner) -> None:
+        """Give `planner` (made on `si`) this problem and set it up."""
+        planner.setProblemDefinition(self.pdef)
+        planner.setup()
+        self.planner = planner
+
+    def release(self) -> None:
+        """Release in dependency order: the planner's data and problem, then the problem
+        definition, the space information and the space. Drop any paths and simplifier first."""
+        self.planner.clear()
+        self.pdef.clearSolutionPaths()
+        del self.planner, self.objective, self.pdef, self.start, self.goal, self.validator, self.si, self.space, self.bounds
+
+
+# --- paths -----------------------------------------------------------------------------------------
+
+
+def drop_collinear(Q: np.ndarray, *, tol_rad: float = 1e-9) -> np.ndarray:
+    """The waypoints without those that lie on the straight segment between their neighbours
+    (the rope shortcut leaves such states on straight stretches): the same motion."""
+    keep = [0]
+    for i in range(1, len(Q) - 1):
+        a, b, c = Q[keep[-1]], Q[i], Q[i + 1]
+        ac = c - a
+        t = float(np.dot(b - a, ac) / max(float(np.dot(ac, ac)), 1e-300))
+        if not (0.0 <= t <= 1.0 and float(np.max(np.abs(a + t * ac - b))) <= tol_rad):
+            keep.append(i)
+    keep.append(len(Q) - 1)
+    return Q[keep]
+
+
+def path_array(path: og.PathGeometric) -> np.ndarray:
+    """An OMPL geometric path's states as an (N, 7) array (rad)."""
+    return np.array([s[0:DOF] for s in path.getStates()], float).reshape(-1, DOF)

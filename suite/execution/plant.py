@@ -1,0 +1,256 @@
+"""The simulated plant and its controllers: execution settings, the Drake diagram, PD gains and grasp contact.
+
+The command stream drives a discrete-time MultibodyPlant built from the same scene in "sim"
+mode: the cans are free bodies with contact, the fingers slide on their prismatic joints.
+
+Control (see `ExecutionConfig`):
+- iiwa: joint position control by the plant's own PD controllers on the 7 actuators (Drake
+  treats them implicitly inside the contact solver, so stiff gains are stable at a 2 ms step),
+  plus an inverse-dynamics feedforward M(q_d) qdd_d + C(q_d, v_d) v_d - tau_g(q_d) computed from
+  the plant's own model along the desired trajectory. The sum is clamped to each joint's effort
+  limit (the URDF's, 40-320 N m), as a real drive would be.
+- WSG: each finger under the same kind of PD position controller, clamped to the gripper's force
+  limit: closing on a can the fingers push with `grip_force_n` each (a position/force controller).
+
+Contact: Drake's discrete solver with the "lagged" convex approximation of SAP and point contact
+between the primitive shapes (boxes, cylinders, capsules). Convex SAP gives stable stacking and
+grasping at millisecond steps without the stiffness tuning TAMSI needs; point contact is enough
+for a parallel-jaw grasp across a rigid can's diameter and keeps the simulation faster than real
+time. See `ExecutionConfig` for the time step.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from scenes.scene import Scene
+
+if TYPE_CHECKING:
+    from suite.execution.commands import CommandStream
+
+CONTACT_MODELS = ("point", "hydroelastic_with_fallback")
+CONTACT_APPROXIMATIONS = ("lagged", "sap", "similar")
+
+
+@dataclasses.dataclass(frozen=True)
+class ExecutionConfig:
+    """How the plans are executed.
+
+    Attributes:
+        time_step_s: the plant's discrete step. 2 ms resolves the fingers closing at 0.1 m/s
+            (0.2 mm per step) and the cans' free fall into the bin, and keeps SAP well conditioned.
+        contact_model: Drake contact model ("point" or "hydroelastic_with_fallback").
+        contact_approximation: Drake discrete contact approximation ("lagged", "sap", "similar").
+        arm_bandwidth_rad_s: natural frequency of each arm joint's PD loop (kp = M_ii w^2,
+            kd = 2 zeta M_ii w, with M_ii the joint's inertia at the start configuration).
+        damping_ratio: zeta above.
+        grip_force_n: force limit of each finger while closing or holding (the WSG 50 grips
+            with up to 80 N).
+        finger_kp_n_m: finger position gain (N/m); the force saturates at grip_force_n.
+        finger_kd_n_s_m: finger velocity gain (N s/m).
+        close_s: time to close the gripper on the can before lifting.
+        open_s: time to open the gripper over the bin before returning.
+        settle_s: simulated time after the last motion before the cans are counted.
+        publish_hz: frame rate of a Meshcat recording.
+    """
+
+    time_step_s: float = 0.002
+    contact_model: str = "hydroelastic_with_fallback"
+    contact_approximation: str = "lagged"
+    hydroelastic_modulus_pa: float = 5e6
+    hydroelastic_resolution_m: float = 0.01
+    arm_bandwidth_rad_s: float = 30.0
+    damping_ratio: float = 1.0
+    grip_force_n: float = 40.0
+    finger_kp_n_m: float = 2000.0
+    finger_kd_n_s_m: float = 40.0
+    close_s: float = 0.6
+    open_s: float = 0.5
+    settle_s: float = 1.0
+    publish_hz: float = 30.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Simulation:
+    """A built simulation and the handles execution and monitoring need.
+
+    Attributes:
+        ds: the scene's Drake objects (`scenes.drake_scene.build_drake_scene`: plant, scene graph,
+            cameras).
+        plant, iiwa, wsg: the MultibodyPlant and the arm's and gripper's model instances.
+        diagram, simulator: the built diagram and its Simulator.
+        root: the simulator's root context; pc: the plant's context in it.
+        commander: the system that turns the command stream into desired states and the arm's
+            feedforward; commander_context: its context in root.
+    """
+
+    ds: Any
+    plant: Any
+    iiwa: Any
+    wsg: Any
+    diagram: Any
+    simulator: Any
+    root: Any
+    pc: Any
+    commander: Any
+    commander_context: Any
+
+
+def build_simulation(
+    scene: Scene,
+    stream: CommandStream,
+    *,
+    q_home: np.ndarray,
+    config: ExecutionConfig,
+    meshcat=None,
+    cameras: bool = False,
+) -> Simulation:
+    """The scene's plant with its controllers driven by `stream`, the arm at `q_home` and the
+    gripper open (see the module docstring); recorded into `meshcat` if given."""
+    from pydrake.multibody.plant import MultibodyPlantConfig
+    from pydrake.multibody.tree import MultibodyForces
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
+
+    from scenes.drake_scene import build_drake_scene
+
+    spec = scene.spec
+    builder = DiagramBuilder()
+    _check_choice("contact model", config.contact_model, CONTACT_MODELS)
+    _check_choice("contact approximation", config.contact_approximation, CONTACT_APPROXIMATIONS)
+    plant_config = MultibodyPlantConfig(
+        time_step=config.time_step_s, contact_model=config.contact_model,
+        discrete_contact_approximation=config.contact_approximation)
+    ds = build_drake_scene(scene, mode="sim", cameras=cameras, builder=builder, build=False,
+                           plant_config=plant_config, couple_fingers=True)
+    plant, iiwa, wsg = ds.plant, ds.iiwa, ds.wsg
+    if config.contact_model != "point":
+        _make_compliant(plant, ds.scene_graph, wsg, scene, config)
+    scratch = plant.CreateDefaultContext()
+    plant.SetPositions(scratch, iiwa, q_home)
+    _set_gains(plant, iiwa, wsg, scratch, config)
+    forces = MultibodyForces(plant)
+    finger_signs = _finger_signs(plant, wsg)  # looked up once: the commander runs every step
+    nv = plant.num_velocities()
+
+    class Commander(LeafSystem):
+        """Desired arm and finger states, and the arm's inverse-dynamics feedforward."""
+
+        def __init__(self):
+            super().__init__()
+            self.DeclareVectorOutputPort("arm_desired_state", 14, self._arm_state)
+            self.DeclareVectorOutputPort("wsg_desired_state", 4, self._wsg_state)
+            self.DeclareVectorOutputPort("arm_feedforward", 7, self._feedforward)
+            self._cached_t, self._cached = None, None
+
+        def _arm(self, t: float):
+            # Both outputs need the same sample in every step: evaluate the trajectory once.
+            if self._cached_t != t:
+                self._cached_t, self._cached = t, stream.at(t).arm(t)
+            return self._cached
+
+        def _arm_state(self, context, output: BasicVector):
+            q, v, _ = self._arm(context.get_time())
+            output.SetFromVector(np.concatenate([q, v]))
+
+        def _wsg_state(self, context, output: BasicVector):
+            t = context.get_time()
+            output.SetFromVector(_finger_targets(finger_signs, *stream.at(t).width(t)))
+
+        def _feedforward(self, context, output: BasicVector):
+            q, v, a = self._arm(context.get_time())
+            plant.SetPositions(scratch, iiwa, q)
+            plant.SetVelocities(scratch, iiwa, v)
+            vdot = np.zeros(nv)
+            plant.SetVelocitiesInArray(iiwa, a, vdot)
+            plant.CalcForceElementsContribution(scratch, forces)
+            tau = plant.CalcInverseDynamics(scratch, vdot, forces)
+            output.SetFromVector(plant.GetVelocitiesFromArray(iiwa, tau))
+
+    commander = builder.AddNamedSystem("commander", Commander())
+    builder.Connect(commander.GetOutputPort("arm_desired_state"), plant.get_desired_state_input_port(iiwa))
+    builder.Connect(commander.GetOutputPort("wsg_desired_state"), plant.get_desired_state_input_port(wsg))
+    builder.Connect(commander.GetOutputPort("arm_feedforward"), plant.get_actuation_input_port(iiwa))
+    if meshcat is not None:
+        from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role
+
+        MeshcatVisualizer.AddToBuilder(builder, ds.scene_graph, meshcat, MeshcatVisualizerParams(
+            role=Role.kIllustration, publish_period=1.0 / config.publish_hz))
+    diagram = builder.Build()
+
+    simulator = Simulator(diagram)
+    root = simulator.get_mutable_context()
+    pc = plant.GetMyMutableContextFromRoot(root)
+    plant.SetPositions(pc, iiwa, q_home)
+    plant.SetPositions(pc, wsg, _finger_targets(finger_signs, spec.grasp.open_width_m, 0.0)[:2])
+    plant.get_actuation_input_port(wsg).FixValue(pc, np.zeros(2))
+    commander_context = commander.GetMyContextFromRoot(root)
+    return Simulation(ds=ds, plant=plant, iiwa=iiwa, wsg=wsg, diagram=diagram, simulator=simulator,
+                      root=root, pc=pc, commander=commander, commander_context=commander_context)
+
+
+def _check_choice(what: str, value: str, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        from scenes.errors import SuiteError
+
+        raise SuiteError(f"unknown {what} {value!r}; allowed: {', '.join(allowed)}")
+
+
+def _set_gains(plant, iiwa, wsg, context, config: ExecutionConfig) -> None:
+    """PD gains for every actuator: arm from the joint inertias at `context`, fingers fixed."""
+    from pydrake.multibody.tree import PdControllerGains
+
+    M = plant.CalcMassMatrix(context)
+    w, zeta = config.arm_bandwidth_rad_s, config.damping_ratio
+    for index in plant.GetJointActuatorIndices(iiwa):
+        actuator = plant.get_joint_actuator(index)
+        m = float(M[actuator.joint().velocity_start(), actuator.joint().velocity_start()])
+        actuator.set_controller_gains(PdControllerGains(p=m * w * w, d=2 * zeta * m * w))
+    for index in plant.GetJointActuatorIndices(wsg):
+        actuator = plant.get_joint_actuator(index)
+        actuator.set_controller_gains(PdControllerGains(p=config.finger_kp_n_m, d=config.finger_kd_n_s_m))
+        actuator.set_effort_limit(config.grip_force_n)
+
+
+def _make_compliant(plant, scene_graph, wsg, scene: Scene, config: ExecutionConfig) -> None:
+    """Hydroelastic grasp contact: compliant finger pads against rigid-hydroelastic cans.
+
+    Their contact is a pressure patch, which resists the can turning about the line between the
+    fingers (two point contacts would let it swing like a pendulum). Every other pair (can on
+    plate, can on can, robot on scene) falls back to point contact, which keeps the step cheap.
+    """
+    from pydrake.geometry import (
+        AddCompliantHydroelasticProperties,
+        AddRigidHydroelasticProperties,
+        ProximityProperties,
+        RoleAssign,
+    )
+
+    inspector = scene_graph.model_inspector()
+
+    def assign(body, add):
+        for gid in plant.GetCollisionGeometriesForBody(body):
+            props = ProximityProperties(inspector.GetProximityProperties(gid))
+            add(props)
+            scene_graph.AssignRole(plant.get_source_id(), gid, props, RoleAssign.kReplace)
+
+    for name in ("left_finger", "right_finger"):
+        assign(plant.GetBodyByName(name, wsg), lambda p: AddCompliantHydroelasticProperties(
+            config.hydroelastic_resolution_m, config.hydroelastic_modulus_pa, p))
+    for can in scene.cans:
+        assign(plant.GetBodyByName(f"can_{can.id}"),
+               lambda p: AddRigidHydroelasticProperties(config.hydroelastic_resolution_m, p))
+
+
+def _finger_signs(plant, wsg) -> np.ndarray:
+    """Per WSG actuator, in actuator order: -1 for the left finger (inner face at -w/2), +1 right."""
+    return np.array([-1.0 if plant.get_joint_actuator(i).joint().name().startswith("left") else 1.0
+                     for i in plant.GetJointActuatorIndices(wsg)])
+
+
+def _finger_targets(signs: np.ndarray, width_m: float, rate_m_s: float) -> np.ndarray:
+    """Desired [q, v] of the WSG's actuated joints for a finger opening and its rate."""
+    return np.concatenate([signs * width_m / 2, signs * rate_m_s / 2])
