@@ -27,6 +27,7 @@ from pydrake.geometry import (
     ColorRenderCamera,
     DepthRenderCamera,
     SceneGraph,
+    Sphere,
 )
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
@@ -75,12 +76,15 @@ def look_at(p_m, target_m) -> RigidTransform:
     return RigidTransform(RotationMatrix(np.column_stack([x, y, z])), p)
 
 
-def _add_box(plant, name, box, friction, body=None):
-    X = RigidTransform(np.asarray(box.center_m))
-    shape = DrakeBox(*box.size_m)
+def _add_obstacle(plant, obstacle, friction, body=None):
+    """One static obstacle primitive (box, cylinder or sphere) on `body` (the world by default)."""
+    X = RigidTransform(obstacle.pose())
+    s = obstacle.size_m
+    shape = {"box": lambda: DrakeBox(*s), "cylinder": lambda: Cylinder(s[0], s[1]),
+             "sphere": lambda: Sphere(s[0])}[obstacle.shape]()
     body = body or plant.world_body()
-    plant.RegisterVisualGeometry(body, X, shape, name, np.asarray(box.color_rgba))
-    return plant.RegisterCollisionGeometry(body, X, shape, name, friction)
+    plant.RegisterVisualGeometry(body, X, shape, obstacle.name, np.asarray(obstacle.color_rgba))
+    return plant.RegisterCollisionGeometry(body, X, shape, obstacle.name, friction)
 
 
 def _can_inertia(spec) -> SpatialInertia:
@@ -152,8 +156,8 @@ def add_scene_to_plant(
     scene_instance = plant.AddModelInstance("scene")
     plate_body = plant.AddRigidBody("plate", scene_instance, SpatialInertia.Zero())
     plant.WeldFrames(plant.world_frame(), plate_body.body_frame())
-    for name, box in spec.static_boxes().items():
-        _add_box(plant, name, box, friction, plate_body if name == "plate" else None)
+    for obstacle in spec.obstacles():
+        _add_obstacle(plant, obstacle, friction, plate_body if obstacle.name == "plate" else None)
 
     can_shape = Cylinder(spec.can.radius_m, spec.can.height_m)
     color = np.asarray(spec.can.color_rgba)

@@ -23,6 +23,18 @@ def fcl_geometry(kind: str, dims) -> fcl.CollisionGeometry:
     raise ValueError(f"unsupported shape {kind!r}")
 
 
+def aabb_half_extents(kind: str, dims, R: np.ndarray) -> np.ndarray:
+    """Half extents (3,) of the world-axis-aligned box around a primitive turned by R (3, 3)."""
+    if kind == "box":
+        return np.abs(R) @ (np.asarray(dims, float) / 2)
+    if kind == "sphere":
+        return np.full(3, float(dims[0]))
+    r, length = dims
+    axis = R[:, 2]
+    half = np.abs(axis) * length / 2 + r * np.sqrt(np.maximum(0.0, 1 - axis**2))
+    return half + (np.full(3, r) if kind == "capsule" else 0.0)
+
+
 def cover_spheres(kind: str, dims, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Spheres covering a primitive: centres (k, 3) in the shape frame, outer and inner radii (k,).
 

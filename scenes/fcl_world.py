@@ -44,7 +44,7 @@ import math
 import fcl
 import numpy as np
 
-from scenes.fcl_shapes import G_INDEX, Part, cover_spheres
+from scenes.fcl_shapes import G_INDEX, Part, aabb_half_extents, cover_spheres, fcl_geometry
 from scenes.fcl_tables import APART, TABLE_MARGIN_M, TOUCHING, UNKNOWN, on_axis, pair_table
 from scenes.robot_model import RobotModel, load_robot
 from scenes.scene import HeldCan, Scene
@@ -108,25 +108,15 @@ class CollisionWorld:
         # --- scene objects, with their axis-aligned boxes (exact for the static boxes) ---
         self.obstacles: list[tuple[str, fcl.CollisionObject]] = []
         obs_c, obs_h, obs_exact = [], [], []
-        for name, box in spec.static_boxes().items():
-            c = np.asarray(box.center_m, float)
-            self.obstacles.append((name, fcl.CollisionObject(fcl.Box(*box.size_m), fcl.Transform(c))))
-            obs_c.append(c)
-            obs_h.append(np.asarray(box.size_m, float) / 2)
-            obs_exact.append(True)
         removed = set(removed_can_ids) | ({held.can.id} if held is not None else set())
         r_can, h_can = spec.can.radius_m, spec.can.height_m
-        for can in scene.cans:
-            if can.id in removed:
-                continue
-            X = can.X_WC()
-            self.obstacles.append(
-                (f"can_{can.id}", fcl.CollisionObject(fcl.Cylinder(r_can, h_can), fcl.Transform(X[:3, :3], X[:3, 3])))
-            )
-            axis = X[:3, 2]
+        prims = [(o.name, o.shape, o.size_m, o.pose(), o.axis_aligned_box) for o in spec.obstacles()]
+        prims += [(f"can_{c.id}", "cylinder", (r_can, h_can), c.X_WC(), False) for c in scene.cans if c.id not in removed]
+        for name, shape, size, X, exact in prims:
+            self.obstacles.append((name, fcl.CollisionObject(fcl_geometry(shape, size), fcl.Transform(X[:3, :3], X[:3, 3]))))
             obs_c.append(X[:3, 3].copy())
-            obs_h.append(np.abs(axis) * h_can / 2 + r_can * np.sqrt(np.maximum(0.0, 1 - axis**2)))
-            obs_exact.append(False)
+            obs_h.append(aabb_half_extents(shape, size, X[:3, :3]))
+            obs_exact.append(exact)  # only an axis-aligned box is its own bounding box
 
         # --- which (part, obstacle) and (part, part) pairs count ---
         self_pairs = []

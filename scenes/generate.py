@@ -1,7 +1,9 @@
-"""Seed-driven scene generation: scatter N cans on the plate, all apart and all graspable."""
+"""Seed-driven scene generation: a station (drawn for a family), then N cans on the plate, all apart
+from each other and from the obstacles, and all graspable."""
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 
@@ -17,6 +19,7 @@ MAX_PLACEMENT_TRIES = 300
 MAX_LAYOUT_RESTARTS = 200
 LAYOUTS_PER_DRAW = 25
 MAX_REACH_ROUNDS = 20
+MAX_STATION_DRAWS = 30
 
 
 def _footprint_corners(can: CanPose, r: float, h: float) -> np.ndarray:
@@ -73,15 +76,116 @@ def _sample_can(rng: np.random.Generator, spec: SceneSpec, can_id: int, lying: b
 
 
 def _place(rng, spec, can_id, others, lying: bool) -> CanPose | None:
-    """A can at least min_gap from the others, or None if random draws found no room."""
+    """A can at least min_gap from the others and the drawn obstacles, or None if random draws
+    found no room."""
     r, h = spec.can.radius_m, spec.can.height_m
     for _ in range(MAX_PLACEMENT_TRIES):
         can = _sample_can(rng, spec, can_id, lying)
         if can is None:
             continue
-        if all(_far_enough(can, o, r, h, spec.cans.min_gap_m) for o in others):
-            return can
+        if not (all(_far_enough(can, o, r, h, spec.cans.min_gap_m) for o in others) and _clear_of_extras(can, spec)):
+            continue
+        if spec.cans.placement == "pickable" and not _gripper_clear(can, others, spec):
+            continue
+        return can
     return None
+
+
+def _gripper_clear(can: CanPose, others, spec: SceneSpec) -> bool:
+    """The open gripper (with link 7, rigid with it) descending from the can's pre-grasp to its
+    grasp (the grasp rule's poses) touches neither the other cans nor the drawn obstacles."""
+    import fcl
+
+    from scenes.fcl_shapes import fcl_geometry
+    from scenes.grasp_rule import truth_grasp
+    from scenes.robot_model import load_robot
+
+    robot = load_robot()
+    finger_X = robot.finger_offsets(spec.grasp.open_width_m)
+    g = truth_grasp(Scene(spec, 0, (can,)), can)
+    X_G7 = np.linalg.inv(robot.X_7G)  # link 7 is rigid with the gripper; its shapes reach the tall distractors
+    parts = [(s.kind, s.dims, (X_G7 if s.body == "iiwa_link_7" else finger_X.get(s.body, np.eye(4))) @ s.X_BS)
+             for s in robot.shapes if s.body in ("iiwa_link_7", "body", "left_finger", "right_finger")]
+    obstacles = []
+    for o in others:
+        X = o.X_WC()
+        obstacles.append(fcl.CollisionObject(fcl.Cylinder(spec.can.radius_m, spec.can.height_m),
+                                             fcl.Transform(X[:3, :3], X[:3, 3])))
+    for o in spec.extra:
+        X = o.pose()
+        obstacles.append(fcl.CollisionObject(fcl_geometry(o.shape, o.size_m), fcl.Transform(X[:3, :3], X[:3, 3])))
+    req = fcl.CollisionRequest()
+    for s in np.linspace(0.0, 1.0, 4):
+        X_WG = g.X_WG.copy()
+        X_WG[:3, 3] = (1 - s) * g.X_WG[:3, 3] + s * g.X_WGpre[:3, 3]
+        for kind, dims, X_GS in parts:
+            X = X_WG @ X_GS
+            part = fcl.CollisionObject(fcl_geometry(kind, dims), fcl.Transform(X[:3, :3], X[:3, 3]))
+            if any(fcl.collide(part, ob, req, fcl.CollisionResult()) for ob in obstacles):
+                return False
+    return True
+
+
+def _clear_of_extras(can: CanPose, spec: SceneSpec) -> bool:
+    """The can at least min_gap from every obstacle a family drew (distractors, shelf, walls)."""
+    if not spec.extra:
+        return True
+    import fcl
+
+    from scenes.fcl_shapes import fcl_geometry
+
+    X = can.X_WC()
+    obj = fcl.CollisionObject(fcl.Cylinder(spec.can.radius_m, spec.can.height_m), fcl.Transform(X[:3, :3], X[:3, 3]))
+    req = fcl.DistanceRequest(enable_signed_distance=True)
+    for o in spec.extra:
+        Xo = o.pose()
+        other = fcl.CollisionObject(fcl_geometry(o.shape, o.size_m), fcl.Transform(Xo[:3, :3], Xo[:3, 3]))
+        if float(fcl.distance(obj, other, req, fcl.DistanceResult())) < spec.cans.min_gap_m + 1e-4:
+            return False
+    return True
+
+
+def station_unreachable(spec: SceneSpec) -> str | None:
+    """Why a drawn station is infeasible, or None: the three task waypoints must have
+    collision-free IK solutions, reached one from the other (above the plate with the gripper
+    open; middle and above the bin also holding an upright can)."""
+    from scenes.drake_scene import build_drake_scene
+    from scenes.grasp_rule import truth_grasp, waypoint_pose
+    from scenes.ik import Q_READY, PoseIk
+    from scenes.scene import HeldCan
+
+    empty = Scene(spec, 0, ())
+    rng = np.random.default_rng(0)
+    ik = PoseIk(build_drake_scene(empty, mode="plan", cameras=False))
+    wp = spec.waypoints
+    q = ik.solve(waypoint_pose(wp.above_plate_m), q_seed=Q_READY, rng=rng)
+    if q is None:
+        return "the waypoint above the plate"
+    px, py, _ = spec.plate.center_m
+    can = CanPose(0, (px, py, spec.plate_top_z_m + spec.can.height_m / 2), False, 0.0)
+    held = HeldCan.from_grasp(can, truth_grasp(Scene(spec, 0, (can,)), can).X_WG)
+    ik_held = PoseIk(build_drake_scene(empty, mode="plan", cameras=False,
+                                       gripper_opening_m=2 * spec.can.radius_m, held=held))
+    for name, p in (("middle", wp.middle_m), ("above the bin", wp.above_bin_m)):
+        q = ik_held.solve(waypoint_pose(p), q_seed=q, rng=rng)
+        if q is None:
+            return f"the {name} waypoint holding a can"
+    return None
+
+
+def draw_feasible_station(spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:
+    """A family's concrete station whose waypoints are reachable (drawn again otherwise)."""
+    from scenes.families import draw_station
+
+    if spec.family is None:
+        return spec
+    for _ in range(MAX_STATION_DRAWS):
+        drawn = draw_station(spec, rng)
+        why = station_unreachable(drawn)
+        if why is None:
+            return drawn
+        log.debug("%s station redrawn: no IK for %s", spec.variant, why)
+    raise SuiteError(f"{spec.variant}: no feasible station in {MAX_STATION_DRAWS} draws; widen the family's ranges")
 
 
 def _far_enough(a: CanPose, b: CanPose, r: float, h: float, gap: float) -> bool:
@@ -111,7 +215,9 @@ def _layout(rng, spec) -> list[CanPose]:
     for one draw (many lying cans on a small plate) is it drawn again.
     """
     n = spec.cans.count
-    for attempt in range(MAX_LAYOUT_RESTARTS):
+    # a dense pickable plate that boxes itself in is better drawn anew with its station
+    restarts = MAX_LAYOUT_RESTARTS if spec.cans.placement == "random" else LAYOUTS_PER_DRAW
+    for attempt in range(restarts):
         if attempt % LAYOUTS_PER_DRAW == 0:
             lying = rng.random(n) < spec.cans.lying_probability
             order = sorted(range(n), key=lambda i: not lying[i])
@@ -126,8 +232,9 @@ def _layout(rng, spec) -> list[CanPose]:
     raise _cannot_place(spec)
 
 
-def unreachable_cans(scene: Scene) -> list[int]:
-    """Ids of cans with no collision-free IK solution for their grasp or pre-grasp."""
+def unreachable_cans(scene: Scene, *, ids=None) -> list[int]:
+    """Ids of cans (of `ids`, all by default) with no collision-free IK solution for their grasp
+    or pre-grasp while every can of the scene is on the plate."""
     from scenes.drake_scene import build_drake_scene
     from scenes.grasp_rule import truth_grasp
     from scenes.ik import Q_READY, PoseIk
@@ -136,6 +243,8 @@ def unreachable_cans(scene: Scene) -> list[int]:
     ik = PoseIk(ds)
     bad = []
     for can in scene.cans:
+        if ids is not None and can.id not in ids:
+            continue
         grasp = truth_grasp(scene, can)
         rng = np.random.default_rng([scene.seed, can.id])
         q_pre = ik.solve(grasp.X_WGpre, q_seed=Q_READY, rng=rng)
@@ -144,31 +253,64 @@ def unreachable_cans(scene: Scene) -> list[int]:
     return bad
 
 
+def picking_order(scene: Scene) -> tuple[list[int], list[int]]:
+    """A picking order in which every can is graspable when its turn comes, and the cans that
+    are not graspable in any order.
+
+    Removing a can only frees room, so a can graspable now stays graspable: the cans graspable
+    with all others present come first (in id order), then those freed by their removal, and so
+    on. On a sparse plate that is simply every can in id order; in clutter a can boxed in by its
+    neighbours comes after them.
+    """
+    order: list[int] = []
+    pending = [c.id for c in scene.cans]
+    while pending:
+        current = scene.without_cans(order)
+        bad = unreachable_cans(current, ids=set(pending))
+        free = [i for i in pending if i not in bad]
+        if not free:
+            return order, pending
+        order += free
+        pending = bad
+    return order, []
+
+
 def generate_scene(spec: SceneSpec, *, seed: int, check_reachable: bool = True) -> Scene:
-    """Scatter `spec.cans.count` cans on the plate.
+    """Draw the station (for a family spec) and scatter `spec.cans.count` cans on the plate.
 
     Every can lies wholly on the plate (with the edge margin), at least `min_gap_m` from every
-    other can, upright or lying with a random yaw; with `check_reachable`, every grasp and
-    pre-grasp has a collision-free IK solution (unreachable cans are drawn again).
+    other can and from the drawn obstacles, upright or lying with a random yaw; with
+    `check_reachable`, every grasp and pre-grasp has a collision-free IK solution when the can's
+    turn comes in the order of the ids (see `picking_order`; unreachable cans are drawn again).
 
     The same seed gives the same scene: all randomness comes from one PCG64 generator.
     """
-    n = spec.cans.count
-    bound = capacity_bound(spec)
-    if n > bound:
-        raise SuiteError(
-            f"cans.count = {n} cannot fit on the plate with min_gap_m = {spec.cans.min_gap_m}: "
-            f"at most {bound} cans fit"
-        )
     rng = np.random.default_rng(seed)
-    cans = _layout(rng, spec)
+    family = spec
+    for draw in range(MAX_STATION_DRAWS):
+        spec = draw_feasible_station(family, rng)
+        n = spec.cans.count
+        bound = capacity_bound(spec)
+        if n > bound:
+            raise SuiteError(
+                f"cans.count = {n} cannot fit on the plate with min_gap_m = {spec.cans.min_gap_m}: "
+                f"at most {bound} cans fit"
+            )
+        try:
+            cans = _layout(rng, spec)
+            break
+        except SuiteError:
+            if family.family is None or draw == MAX_STATION_DRAWS - 1:
+                raise
+            log.debug("seed %d: no room for the cans on drawn station %d; drawn again", seed, draw)
     scene = Scene(spec, seed, tuple(cans))
     if not check_reachable:
         return scene
     for round_ in range(MAX_REACH_ROUNDS):
-        bad = unreachable_cans(scene)
+        order, bad = picking_order(scene)
         if not bad:
-            return scene
+            # ids follow the picking order, so every user of the scene picks in a feasible order
+            return Scene(spec, seed, tuple(dataclasses.replace(cans[i], id=k) for k, i in enumerate(order)))
         log.debug("seed %d round %d: redrawing unreachable cans %s", seed, round_, bad)
         for i in bad:
             others = [c for c in cans if c.id != i]

@@ -91,6 +91,12 @@ def make_grasp(
     return Grasp(can_id, X_WG, X_WGpre, lying)
 
 
+def waypoint_pose(p_m) -> np.ndarray:
+    """A task waypoint: the gripper pointing down, its yaw facing away from the robot base."""
+    yaw = grasp_yaw(p_xy_m=p_m[:2], lying=False, axis_yaw_rad=0.0)
+    return down_pose(np.asarray(p_m, float), yaw)
+
+
 def truth_grasp(scene, can) -> Grasp:
     """The grasp the rule gives for a can's ground-truth pose."""
     spec = scene.spec

@@ -91,11 +91,14 @@ class Scene:
     def _key(self) -> str:
         # Computed once per instance (hashing the spec's JSON costs ~2 ms); cached_property writes
         # the instance __dict__ directly, which a frozen dataclass allows.
-        blob = json.dumps({"spec": self.spec.to_dict(), "truth": self.to_json()}, sort_keys=True, default=list)
+        truth = {k: v for k, v in self.to_json().items() if k not in ("obstacles", "waypoints_m")}  # in the spec
+        blob = json.dumps({"spec": self.spec.to_dict(), "truth": truth}, sort_keys=True, default=list)
         return hashlib.sha1(blob.encode()).hexdigest()[:16]
 
     def to_json(self) -> dict:
-        """The ground truth as printed by `python -m suite scene --json`."""
+        """The ground truth as printed by `python -m suite scene --json`: the plate, the cans, every
+        static obstacle as a primitive (`{"name", "shape", "size_m", "X_WO"}`, X_WO row-major) and
+        the task waypoints (gripper positions)."""
         plate = self.spec.plate
         return {
             "seed": self.seed,
@@ -105,5 +108,7 @@ class Scene:
                 "size_m": [plate.size_m[0], plate.size_m[1]],
             },
             "cans": [c.to_json() for c in self.cans],
+            "obstacles": [o.to_json() for o in self.spec.obstacles()],
+            "waypoints_m": {k: [round(v, 6) for v in p] for k, p in dataclasses.asdict(self.spec.waypoints).items()},
         }
 

@@ -1,8 +1,10 @@
 """The scene specification: typed, validated, loaded from YAML.
 
-A spec describes the static world (table, plate, bin, optional wall), the can model, the can
-generator's settings, the grasp rule's offsets, the task waypoints and the cameras. Variants
-(`open`, `wall`) are overrides merged into the base spec before it is parsed.
+A spec describes the static world (table, plate, bin, optional wall, further obstacles), the can
+model, the can generator's settings, the grasp rule's offsets, the task waypoints and the cameras.
+Variants (`open`, `wall`) are overrides merged into the base spec before it is parsed. Families
+(`station`, `shelf`, `window`, `clutter`, see `scenes.families`) carry ranges instead: the scene
+generator draws a concrete station from them with the scene's seed.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from scenes.errors import SuiteError
@@ -26,6 +29,55 @@ class Box:
     center_m: tuple[float, float, float]
     size_m: tuple[float, float, float]
     color_rgba: tuple[float, float, float, float]
+
+
+#: Shapes an obstacle can have, with the meaning of its `size_m`.
+OBSTACLE_SHAPES = {"box": "full size x, y, z", "cylinder": "radius, length along its z", "sphere": "radius"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Obstacle:
+    """A static obstacle primitive at a pose in the world.
+
+    Attributes:
+        name: unique in its scene (`table`, `plate`, `bin_floor`, `wall`, `shelf_board`,
+            `distractor_0`, ...).
+        shape: `box`, `cylinder` or `sphere` (see OBSTACLE_SHAPES for `size_m`).
+        size_m: box (x, y, z) full size; cylinder (radius, length); sphere (radius,).
+        X_WO: the obstacle's frame in the world, 4x4 row-major; a cylinder's axis is its z.
+        color_rgba: its colour for rendering.
+    """
+
+    name: str
+    shape: str
+    size_m: tuple[float, ...]
+    X_WO: tuple[tuple[float, float, float, float], ...]
+    color_rgba: tuple[float, float, float, float]
+
+    def pose(self) -> np.ndarray:
+        """X_WO as a (4, 4) array."""
+        return np.array(self.X_WO, float)
+
+    @property
+    def axis_aligned_box(self) -> bool:
+        """True for a box whose axes are the world's (exact bounds for the collision world)."""
+        return self.shape == "box" and bool(np.allclose(self.pose()[:3, :3], np.eye(3), atol=1e-12))
+
+    @staticmethod
+    def from_box(name: str, box: "Box") -> "Obstacle":
+        X = np.eye(4)
+        X[:3, 3] = box.center_m
+        return Obstacle(name, "box", tuple(box.size_m), pose_tuple(X), tuple(box.color_rgba))
+
+    def to_json(self) -> dict:
+        """`{"name", "shape", "size_m", "X_WO"}` as printed by `scene --json`."""
+        return {"name": self.name, "shape": self.shape, "size_m": [round(v, 6) for v in self.size_m],
+                "X_WO": [[round(v, 9) for v in row] for row in self.X_WO]}
+
+
+def pose_tuple(X: np.ndarray) -> tuple[tuple[float, float, float, float], ...]:
+    """A (4, 4) pose as nested tuples of floats (hashable, JSON-able)."""
+    return tuple(tuple(float(v) for v in row) for row in np.asarray(X, float))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,6 +122,10 @@ class CanGenerator:
     min_gap_m: float
     edge_margin_m: float
     lying_probability: float
+    #: "random": cans anywhere apart from each other (the paper's plate); "pickable": each new can
+    #: is placed where the open gripper can descend onto it past the cans already placed, so that
+    #: picking in the reverse order of placement is collision-free (dense plates, `clutter`)
+    placement: str = "random"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -125,6 +181,11 @@ class SceneSpec:
     waypoints: Waypoints
     cameras: CameraSpec
     wall: Box | None = None
+    #: further obstacles drawn by a family's generator (shelf, window frame, distractors, a turned wall)
+    extra: tuple[Obstacle, ...] = ()
+    #: a family's ranges (a `scenes.families` dataclass) while the station is still to be drawn;
+    #: None for a concrete station
+    family: Any = None
 
     @property
     def plate_top_z_m(self) -> float:
@@ -139,9 +200,17 @@ class SceneSpec:
             boxes["wall"] = self.wall
         return boxes
 
+    def obstacles(self) -> tuple[Obstacle, ...]:
+        """Every static obstacle as a primitive: the static boxes, then the drawn extras."""
+        return tuple(Obstacle.from_box(n, b) for n, b in self.static_boxes().items()) + self.extra
+
     def with_can_count(self, count: int) -> "SceneSpec":
-        """A copy with another number of cans."""
-        return dataclasses.replace(self, cans=dataclasses.replace(self.cans, count=count))
+        """A copy with another number of cans (for a family that draws the count, e.g. `clutter`,
+        its range becomes exactly `count`)."""
+        family = self.family
+        if family is not None and hasattr(family, "cans"):
+            family = dataclasses.replace(family, cans=(count, count))
+        return dataclasses.replace(self, cans=dataclasses.replace(self.cans, count=count), family=family)
 
     def with_min_gap(self, min_gap_m: float) -> "SceneSpec":
         """A copy with another minimum gap between cans."""
@@ -152,8 +221,16 @@ class SceneSpec:
         return dataclasses.replace(self, can=dataclasses.replace(self.can, color_rgba=color_rgba))
 
     def to_dict(self) -> dict[str, Any]:
-        """A plain, JSON-able dict (used for hashing and manifests)."""
-        return dataclasses.asdict(self)
+        """A plain, JSON-able dict (used for hashing, manifests and datasets). The family fields are
+        left out while unused, so the fixed variants hash as they did before families existed."""
+        d = dataclasses.asdict(self)
+        if not d["extra"]:
+            del d["extra"]
+        if d["family"] is None:
+            del d["family"]
+        if d["cans"]["placement"] == "random":
+            del d["cans"]["placement"]
+        return d
 
 
 # --- parsing -------------------------------------------------------------------------------------
@@ -198,7 +275,7 @@ def _rgba(raw: Any, field: str) -> tuple[float, float, float, float]:
     return v  # type: ignore[return-value]
 
 
-def _section(raw: dict, key: str, allowed: set[str], prefix: str = "") -> dict:
+def _section(raw: dict, key: str, allowed: set[str], prefix: str = "", optional: frozenset = frozenset()) -> dict:
     name = f"{prefix}{key}"
     sec = raw.get(key)
     if not isinstance(sec, dict):
@@ -208,7 +285,7 @@ def _section(raw: dict, key: str, allowed: set[str], prefix: str = "") -> dict:
         raise SuiteError(
             f"scene spec field '{name}.{sorted(unknown)[0]}' is unknown; allowed: {sorted(allowed)}"
         )
-    missing = allowed - set(sec)
+    missing = allowed - set(sec) - optional
     if missing:
         raise SuiteError(f"scene spec field '{name}.{sorted(missing)[0]}' is missing")
     return sec
@@ -235,20 +312,37 @@ def parse_spec(raw: Any, *, variant: str) -> SceneSpec:
     """
     if not isinstance(raw, dict):
         raise SuiteError("scene spec must be a YAML mapping at the top level")
-    top = {"table", "plate", "bin", "can", "cans", "grasp", "waypoints", "cameras", "variants"}
+    top = {"table", "plate", "bin", "can", "cans", "grasp", "waypoints", "cameras", "variants", "families"}
     unknown = set(raw) - top
     if unknown:
         raise SuiteError(f"scene spec field '{sorted(unknown)[0]}' is unknown; allowed: {sorted(top)}")
     variants = raw.get("variants") or {}
     if not isinstance(variants, dict):
         raise SuiteError("scene spec field 'variants' must be a mapping of name -> overrides")
-    if variant not in variants:
-        raise SuiteError(f"unknown variant {variant!r}; allowed: {sorted(variants)}")
-    override = variants[variant] or {}
+    families = raw.get("families") or {}
+    if not isinstance(families, dict):
+        raise SuiteError("scene spec field 'families' must be a mapping of name -> family")
+    family = None
+    if variant in families:
+        from scenes.family_ranges import parse_family
+
+        fam = families[variant]
+        family = parse_family(fam, name=variant)
+        base = fam.get("base", "open")
+        if base not in variants:
+            raise SuiteError(f"scene spec field 'families.{variant}.base' = {base!r}: allowed: {sorted(variants)}")
+        fam_over = fam.get("overrides") or {}
+        if not isinstance(fam_over, dict):
+            raise SuiteError(f"scene spec field 'families.{variant}.overrides' must be a mapping")
+        override = _merge(variants[base] or {}, fam_over)
+    elif variant in variants:
+        override = variants[variant] or {}
+    else:
+        raise SuiteError(f"unknown variant {variant!r}; allowed: {sorted([*variants, *families])}")
     if not isinstance(override, dict):
         raise SuiteError(f"scene spec field 'variants.{variant}' must be a mapping")
     wall_raw = override.get("wall")
-    merged = _merge({k: v for k, v in raw.items() if k != "variants"},
+    merged = _merge({k: v for k, v in raw.items() if k not in ("variants", "families")},
                     {k: v for k, v in override.items() if k != "wall"})
 
     t = _section(merged, "table", {"size_m", "center_xy_m", "color_rgba"})
@@ -273,7 +367,11 @@ def parse_spec(raw: Any, *, variant: str) -> SceneSpec:
         _num(c["mass_kg"], "can.mass_kg", positive=True),
         _rgba(c["color_rgba"], "can.color_rgba"),
     )
-    g = _section(merged, "cans", {"count", "min_gap_m", "edge_margin_m", "lying_probability"})
+    g = _section(merged, "cans", {"count", "min_gap_m", "edge_margin_m", "lying_probability", "placement"},
+                 optional=frozenset({"placement"}))
+    placement = g.get("placement", "random")
+    if placement not in ("random", "pickable"):
+        raise SuiteError(f"scene spec field 'cans.placement' = {placement!r}: allowed: ['pickable', 'random']")
     count = g["count"]
     if isinstance(count, bool) or not isinstance(count, int) or count < 0:
         raise SuiteError(f"scene spec field 'cans.count' must be an integer >= 0, got {count!r}")
@@ -285,6 +383,7 @@ def parse_spec(raw: Any, *, variant: str) -> SceneSpec:
         _num(g["min_gap_m"], "cans.min_gap_m", nonneg=True),
         _num(g["edge_margin_m"], "cans.edge_margin_m", nonneg=True),
         lying_p,
+        placement,
     )
     gr = _section(merged, "grasp", {"top_offset_m", "pregrasp_height_m", "open_width_m", "held_margin_m"})
     grasp = GraspSpec(
@@ -332,6 +431,7 @@ def parse_spec(raw: Any, *, variant: str) -> SceneSpec:
         waypoints=waypoints,
         cameras=cameras,
         wall=wall,
+        family=family,
     )
 
 
@@ -360,4 +460,22 @@ def available_variants(path: str | Path | None = None) -> list[str]:
     """The variant names a spec file defines."""
     path = Path(path) if path is not None else DEFAULT_SPEC_PATH
     raw = yaml.safe_load(path.read_text()) or {}
-    return sorted((raw.get("variants") or {}).keys())
+    return sorted([*(raw.get("variants") or {}), *(raw.get("families") or {})])
+
+
+def spec_from_dict(data: dict[str, Any]) -> SceneSpec:
+    """A concrete SceneSpec from its `to_dict()` (as stored in datasets); validated by pydantic.
+
+    Raises:
+        SuiteError: naming the first bad field.
+    """
+    import pydantic
+
+    if data.get("family") is not None:
+        raise SuiteError("a stored scene spec must be a concrete station (field 'family' must be null)")
+    try:
+        return pydantic.TypeAdapter(SceneSpec).validate_python(data)
+    except pydantic.ValidationError as exc:
+        err = exc.errors(include_url=False)[0]
+        field = ".".join(str(x) for x in err["loc"])
+        raise SuiteError(f"stored scene spec field '{field}' = {err['input']!r}: {err['msg']}") from None

@@ -15,7 +15,7 @@ import logging
 import numpy as np
 
 from planners.base import PlanningProblem, PlanStatus, TaskWaypoint
-from scenes.grasp_rule import Grasp, down_pose, grasp_yaw
+from scenes.grasp_rule import Grasp, waypoint_pose
 from scenes.ik import Q_READY, IkOptions, PoseIk
 from scenes.scene import CanPose, HeldCan, Scene
 
@@ -31,12 +31,6 @@ SCHEDULE = {
     "transit": (18.0, 30.0),
     "return": (33.0, 45.0),
 }
-
-
-def waypoint_pose(p_m) -> np.ndarray:
-    """A task waypoint: the gripper pointing down, its yaw facing away from the robot base."""
-    yaw = grasp_yaw(p_xy_m=p_m[:2], lying=False, axis_yaw_rad=0.0)
-    return down_pose(np.asarray(p_m, float), yaw)
 
 
 #: IK options for the intermediate poses of a continuation: near seeds only.

@@ -1,0 +1,131 @@
+"""Scene families: drawn stations are deterministic, feasible and within their ranges."""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import pytest
+
+from scenes.errors import SuiteError
+from scenes.generate import generate_scene, picking_order, station_unreachable
+from scenes.spec import load_spec, loads_spec, spec_from_dict
+from scenes.spec import DEFAULT_SPEC_PATH
+
+FAMILIES = ("station", "shelf", "window", "clutter")
+
+
+@functools.lru_cache(maxsize=None)
+def family_scene(family: str, seed: int):
+    spec = load_spec(variant=family)
+    if family == "clutter":
+        spec = spec.with_can_count(6)  # dense, but fewer cans keep the test fast
+    return generate_scene(spec.with_can_count(spec.cans.count if family == "clutter" else 3), seed=seed)
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_same_seed_same_station(family):
+    a = family_scene(family, 4242)
+    spec = load_spec(variant=family)
+    b = generate_scene(spec.with_can_count(6 if family == "clutter" else 3), seed=4242)
+    assert a.key() == b.key() and a.to_json() == b.to_json()
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_station_is_feasible_and_cans_pickable_in_id_order(family):
+    scene = family_scene(family, 4243)
+    assert scene.spec.family is None and scene.variant == family
+    assert station_unreachable(scene.spec) is None
+    order, bad = picking_order(scene)
+    assert bad == [] and order == sorted(order)
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_everything_on_the_table_and_cans_apart_from_obstacles(family):
+    import fcl
+
+    from scenes.fcl_shapes import fcl_geometry
+
+    scene = family_scene(family, 4244)
+    spec = scene.spec
+    tx, ty, _ = spec.table.center_m
+    sx, sy, _ = spec.table.size_m
+    for o in spec.obstacles():
+        p = o.pose()[:3, 3]
+        assert abs(p[0] - tx) <= sx / 2 and abs(p[1] - ty) <= sy / 2, o.name
+    cx, cy, _ = spec.plate.center_m
+    for can in scene.cans:
+        assert abs(can.p_WC_m[0] - cx) < spec.plate.size_m[0] / 2 and abs(can.p_WC_m[1] - cy) < spec.plate.size_m[1] / 2
+        X = can.X_WC()
+        a = fcl.CollisionObject(fcl.Cylinder(spec.can.radius_m, spec.can.height_m), fcl.Transform(X[:3, :3], X[:3, 3]))
+        for o in spec.extra:
+            Xo = o.pose()
+            b = fcl.CollisionObject(fcl_geometry(o.shape, o.size_m), fcl.Transform(Xo[:3, :3], Xo[:3, 3]))
+            d = fcl.distance(a, b, fcl.DistanceRequest(enable_signed_distance=True), fcl.DistanceResult())
+            assert d >= spec.cans.min_gap_m - 1e-6, (can.id, o.name)
+
+
+def test_station_draws_the_bin_beside_or_behind_within_ranges():
+    r = load_spec(variant="station").family
+    turns = []
+    for seed in range(5000, 5012):
+        from scenes.families import draw_station
+
+        s = draw_station(load_spec(variant="station"), np.random.default_rng(seed))
+        p, b = np.asarray(s.plate.center_m[:2]), np.asarray(s.bin.center_xy_m)
+        assert r.plate_distance_m[0] - 1e-9 <= np.linalg.norm(p) <= r.plate_distance_m[1] + 1e-9
+        assert r.bin_distance_m[0] - 1e-9 <= np.linalg.norm(b) <= r.bin_distance_m[1] + 1e-9
+        turn = abs(math.degrees(math.atan2(p[0] * b[1] - p[1] * b[0], p @ b)))
+        assert r.bin_turn_deg[0] - 1e-6 <= turn <= 180.0
+        turns.append(turn)
+        assert s.waypoints.above_plate_m[:2] == s.plate.center_m[:2]
+        assert s.cameras.poses["top"].target_m[:2] == s.plate.center_m[:2]
+    assert max(turns) > 120  # behind the robot too, not only beside it
+
+
+def test_clutter_has_distractors_and_dense_cans():
+    scene = family_scene("clutter", 4245)
+    names = [o.name for o in scene.spec.extra]
+    assert sum(n.startswith("distractor_") for n in names) >= 2
+    assert scene.spec.cans.min_gap_m <= 0.01 and len(scene.cans) == 6
+
+
+def test_scene_json_lists_obstacles_and_waypoints():
+    scene = family_scene("window", 4246)
+    d = scene.to_json()
+    names = {o["name"] for o in d["obstacles"]}
+    assert {"table", "plate", "bin_floor", "wall_left", "wall_right", "wall_sill", "wall_lintel"} <= names
+    for o in d["obstacles"]:
+        assert o["shape"] in ("box", "cylinder", "sphere") and np.asarray(o["X_WO"]).shape == (4, 4)
+    assert set(d["waypoints_m"]) == {"above_plate_m", "middle_m", "above_bin_m"}
+
+
+def test_drawn_spec_round_trips_through_a_dict():
+    spec = family_scene("station", 4247).spec
+    assert spec_from_dict(spec.to_dict()) == spec
+
+
+def test_open_and_wall_keep_their_scenes():
+    # the fixed variants draw no station: same cans as before families existed (seed 3, wall)
+    scene = generate_scene(load_spec(variant="wall"), seed=3, check_reachable=False)
+    assert scene.key() == "09abb10890bacd9a"
+
+
+@pytest.mark.parametrize("edit, field", [
+    ("plate_distance_m: [0.55, 0.64]", "plate_distance_m"),
+    ("bin_turn_deg: [60, 170]", "bin_turn_deg"),
+])
+def test_infeasible_range_is_one_line_naming_the_field(edit, field):
+    text = DEFAULT_SPEC_PATH.read_text()
+    bad = {"plate_distance_m": "plate_distance_m: [0.55, 1.40]", "bin_turn_deg": "bin_turn_deg: [170, 60]"}[field]
+    assert edit in text
+    with pytest.raises(SuiteError, match=rf"families\.station\.ranges\.{field}") as exc:
+        loads_spec(text.replace(edit, bad), variant="station")
+    assert "\n" not in str(exc.value)
+
+
+def test_unknown_range_field_is_named():
+    text = DEFAULT_SPEC_PATH.read_text().replace("wall_probability: 0.5", "wall_probability: 0.5\n      wall_colour: 3")
+    with pytest.raises(SuiteError, match=r"families\.station\.ranges\.wall_colour' is unknown"):
+        loads_spec(text, variant="station")
