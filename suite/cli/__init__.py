@@ -20,6 +20,7 @@ COMMANDS = {
     "plan": ("suite.cli.plan", "plan every pick-and-place motion of one scene with one planner"),
     "compare": ("suite.cli.compare", "run the planner comparison and write results, table and plots"),
     "execute": ("suite.cli.execute", "plan one scene and execute the plans in physics: are the cans recycled?"),
+    "dataset": ("suite.cli.dataset", "build, verify or show a frozen dataset of problems with reference solutions"),
     "plot": ("suite.cli.plot", "redraw the plots and tables of a run from its trials.jsonl"),
     "bench": ("suite.cli.bench", "print speed figures (collision, perception, planners)"),
 }

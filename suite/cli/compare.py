@@ -16,17 +16,23 @@ from scenes.errors import SuiteError
 from suite.run.runner import TRIALS_FILE, CompareConfig
 
 RESULTS_DIR = Path("results")
+#: Flags that describe generated scenes (they cannot be combined with --dataset).
+GENERATED_FLAGS = ("variant", "scenes", "cans", "grasps")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     d = CompareConfig()
     p.add_argument("--planners", default=None, help=f"comma-separated planner names (default {','.join(d.planners)})")
-    p.add_argument("--variant", default=None, help=f"scene variant: open or wall (default {d.variant})")
-    p.add_argument("--seed", type=nonneg_int, default=None, help=f"first scene seed and run seed (default {d.seed})")
-    p.add_argument("--scenes", type=positive_int, default=None, help=f"number of scenes (default {d.scenes})")
-    p.add_argument("--cans", type=positive_int, default=None, help=f"cans per scene (default {d.cans})")
+    p.add_argument("--dataset", default=None, metavar="NAME[:TIER]",
+                   help=f"run a frozen dataset's stored problems (default {d.dataset}; the scene flags below "
+                        "select generated scenes instead)")
+    p.add_argument("--variant", default=None, help=f"generated scenes of this variant or family (default {d.variant})")
+    p.add_argument("--seed", type=nonneg_int, default=None,
+                   help=f"run seed, and first scene seed of generated scenes (default {d.seed})")
+    p.add_argument("--scenes", type=positive_int, default=None, help=f"number of generated scenes (default {d.scenes})")
+    p.add_argument("--cans", type=positive_int, default=None, help=f"cans per generated scene (default {d.cans})")
     p.add_argument("--grasps", choices=("perceived", "truth"), default=None,
-                   help=f"grasps from perception or from ground truth (default {d.grasps})")
+                   help=f"generated scenes' grasps from perception or from ground truth (default {d.grasps})")
     p.add_argument("--time-limit-s", type=positive_float, default=None,
                    help=f"planning budget per problem, seconds (default {d.time_limit_s})")
     p.add_argument("--jobs", type=positive_int, default=None, help=f"worker processes (default {d.jobs})")
@@ -88,6 +94,14 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
         v = getattr(args, key)
         if v is not None:
             values[key] = v
+    # --seed is also the run seed, so it goes with either; the others describe generated scenes.
+    generated = [f"--{k}" for k in GENERATED_FLAGS if getattr(args, k) is not None]
+    if args.dataset is not None and generated:
+        raise SuiteError(f"--dataset runs stored problems; {generated[0]} selects generated scenes: use one or the other")
+    if args.dataset is not None:
+        values["dataset"] = args.dataset
+    elif generated:
+        values["dataset"] = None
     planners = args.planners if args.planners is not None else values["planners"]
     if isinstance(planners, (list, tuple)):
         planners = ",".join(str(p) for p in planners)
@@ -95,9 +109,17 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     if isinstance(values["time_limit_s"], int) and not isinstance(values["time_limit_s"], bool):
         values["time_limit_s"] = float(values["time_limit_s"])
     config = _validated(values, source=source)
-    variants = available_variants(config.spec)
-    if config.variant not in variants:
-        raise SuiteError(f"unknown variant {config.variant!r}; allowed: {variants}")
+    if config.dataset:
+        from suite.problems.dataset import dataset_dir, parse_dataset_arg, read_manifest
+
+        name, tier = parse_dataset_arg(config.dataset)
+        tiers = ["all", *sorted(read_manifest(dataset_dir(name)).get("tiers", {}))]
+        if tier not in tiers:
+            raise SuiteError(f"dataset {name!r} has no tier {tier!r}; allowed: {tiers}")
+    else:
+        variants = available_variants(config.spec)
+        if config.variant not in variants:
+            raise SuiteError(f"unknown variant {config.variant!r}; allowed: {variants}")
     return config
 
 
@@ -129,9 +151,14 @@ def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, prog
     from suite.execution.jobs import jobs_from_records, run_jobs, write_execution
     from suite.run.records import read_trials
 
+    steps = None
+    if config.dataset:
+        from suite.problems.dataset import load_dataset
+
+        steps = load_dataset(config.dataset).cycle_steps
     jobs = jobs_from_records(trials, read_trials(out / TRIALS_FILE), grasps=config.grasps,
                              time_limit_s=config.time_limit_s, seed=config.seed, reperceive=reperceive,
-                             replay_dir=out)
+                             replay_dir=out, cycle_steps=steps)
     print(f"executing {len(jobs)} plan(s) in physics ({'closed loop' if reperceive else 'open loop'})...",
           file=sys.stderr)
     write_execution(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar))
@@ -146,8 +173,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"run directory: {out}", file=sys.stderr)
     if not args.resume:
         write_manifest(out, config, argv=sys.argv[1:])
-    print(f"preparing {config.scenes} {config.variant} scene(s) of {config.cans} cans "
-          f"({config.grasps} grasps)...", file=sys.stderr)
+    if config.dataset:
+        print(f"loading dataset {config.dataset}...", file=sys.stderr)
+    else:
+        print(f"preparing {config.scenes} {config.variant} scene(s) of {config.cans} cans "
+              f"({config.grasps} grasps)...", file=sys.stderr)
     executor = make_executor(config.executor, jobs=config.jobs, scheduler=config.scheduler)
     if hasattr(executor, "start"):
         executor.start()  # the workers import Drake and OMPL while the problems are prepared

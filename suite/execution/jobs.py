@@ -185,40 +185,63 @@ def _meshcat(scene: Scene):
 
 
 def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str, time_limit_s: float,
-                      seed: int, reperceive: bool, replay_dir: Path | None) -> list[ExecutionJob]:
+                      seed: int, reperceive: bool, replay_dir: Path | None,
+                      cycle_steps: dict | None = None) -> list[ExecutionJob]:
     """One job per planner and scene of a comparison run, its plans taken from the trial records.
 
     Args:
         trials: the run's TrialSpecs in problem order (this gives each scene's picking order).
         records: the run's trial records (paths of the successful, validated trials).
         replay_dir: where to write replay_<planner>.html for each planner's first scene, or None.
+        cycle_steps: a dataset's trivial cycle steps left out of its benchmark, (scene key, can
+            id, kind) -> (q_start, q_goal): executed along their (validated) straight segment.
     """
+    from planners.base import PROBLEM_KINDS
+
     by_id = {r["trial_id"]: r for r in records}
-    groups: dict[tuple[str, int], list] = {}
-    scenes: dict[int, Scene] = {}
+    groups: dict[tuple[str, str], list] = {}
+    scenes: dict[str, Scene] = {}
     configs: dict[str, dict] = {}
     for t in trials:
-        groups.setdefault((t.planner, t.problem.scene.seed), []).append(t)
-        scenes[t.problem.scene.seed] = t.problem.scene
+        key = t.problem.scene.key()
+        groups.setdefault((t.planner, key), []).append(t)
+        scenes[key] = t.problem.scene
         configs[t.planner] = t.planner_config
+    steps = cycle_steps or {}
     jobs, replayed = [], set()
-    for (planner, scene_seed), specs in groups.items():
-        cans: dict[int, list] = {}
+    for (planner, key), specs in groups.items():
+        by_can: dict[int, dict[str, Any]] = {}
         for t in specs:
             rec = by_id.get(t.trial_id)
             status = rec["status"] if rec else "not run"
-            entry = cans.setdefault(t.problem.can_id, [[], ""])
-            entry[0].append(rec["path"] if status == "success" else None)
-            if status != "success" and not entry[1]:
-                entry[1] = f"{t.problem.kind} {status}"
+            by_can.setdefault(t.problem.can_id, {})[t.problem.kind] = (rec["path"] if status == "success" else None,
+                                                                     t.problem.q_start, status)
+        cans: dict[int, list] = {}
+        q_home = None
+        for can_id in sorted(by_can):
+            paths, failed = [], ""
+            for kind in PROBLEM_KINDS:
+                if kind in by_can[can_id]:
+                    path, q_start, status = by_can[can_id][kind]
+                elif (key, can_id, kind) in steps:  # a trivial step stored outside the benchmark
+                    q_start, q_goal = steps[(key, can_id, kind)]
+                    path, status = [list(q_start), list(q_goal)], "success"
+                else:
+                    path, q_start, status = None, None, "not in the dataset"
+                if q_home is None and q_start is not None:
+                    q_home = q_start
+                paths.append(path)
+                if path is None and not failed:
+                    failed = f"{kind} {status}"
+            cans[can_id] = [paths, failed]
         replay = None
         if replay_dir is not None and planner not in replayed:
             replay, _ = str(Path(replay_dir) / f"replay_{planner}.html"), replayed.add(planner)
         jobs.append(ExecutionJob(
-            planner=planner, planner_config=configs[planner], scene=scenes[scene_seed], grasps=grasps,
+            planner=planner, planner_config=configs[planner], scene=scenes[key], grasps=grasps,
             time_limit_s=time_limit_s, seed=seed, reperceive=reperceive, replay_path=replay,
             cans=None if reperceive else tuple((c, tuple(p), f) for c, (p, f) in cans.items()),
-            q_home=tuple(float(v) for v in specs[0].problem.q_start),
+            q_home=None if q_home is None else tuple(float(v) for v in q_home),
         ))
     return jobs
 

@@ -30,6 +30,8 @@ MANIFEST_FILE = "manifest.json"
 #: Grace beyond a trial's time limit before the parent kills its worker (scene building, timing).
 HARD_LIMIT_GRACE_S = 30.0
 HARD_LIMIT_FACTOR = 3.0
+#: What `compare` runs by default: the frozen benchmark's quick tier.
+DEFAULT_DATASET = "recycle-v1:quick"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -53,6 +55,9 @@ class CompareConfig:
     executor: Literal["local", "dask"] = "local"
     scheduler: str | None = None
     hard_limit_grace_s: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)] = HARD_LIMIT_GRACE_S
+    #: a frozen dataset `NAME[:TIER]` to run instead of generated scenes (None: generate them from
+    #: variant, seed, scenes, cans and grasps)
+    dataset: str | None = DEFAULT_DATASET
 
 
 def worker_init() -> None:
@@ -89,28 +94,55 @@ def scene_grasps(scene, *, grasps: str):
 
 
 def prepare_trials(config: CompareConfig, *, progress=None) -> list[TrialSpec]:
-    """Generate the scenes, their grasps and problems, and one trial per problem and planner."""
+    """One trial per distinct problem and planner: the dataset's stored problems, or problems of
+    generated scenes (identical problems kept once, each with its identity, triviality and
+    difficulty)."""
     from planners.registry import planner_class
-    from scenes.generate import generate_scene
-    from scenes.spec import load_spec
-    from suite.problems.cycle import build_problems
 
-    spec = load_spec(config.spec, variant=config.variant).with_can_count(config.cans)
     configs = {}
     for name in config.planners:
         cls = planner_class(name)
         configs[name] = config_dict(make_config(cls, config.planner_configs.get(name)))
     trials = []
+    for problem, meta in (_dataset_problems(config) if config.dataset else _generated_problems(config, progress)):
+        for name in config.planners:
+            trials.append(make_trial(problem, planner=name, planner_config=configs[name], run_seed=config.seed,
+                                     meta=meta))
+    return trials
+
+
+def _dataset_problems(config: CompareConfig):
+    from suite.problems.dataset import load_dataset
+
+    ds = load_dataset(config.dataset, time_limit_s=config.time_limit_s)
+    for pid, problem in zip(ds.ids, ds.problems):
+        yield problem, ds.meta[pid]
+
+
+def _generated_problems(config: CompareConfig, progress):
+    from scenes.generate import generate_scene
+    from scenes.spec import load_spec
+    from suite.problems.cycle import build_problems
+    from suite.problems.identity import problem_id, straight_line
+
+    spec = load_spec(config.spec, variant=config.variant).with_can_count(config.cans)
+    seen: set[str] = set()
     for scene_seed in range(config.seed, config.seed + config.scenes):
         scene = generate_scene(spec, seed=scene_seed)
         grasps = scene_grasps(scene, grasps=config.grasps)
-        problems = build_problems(scene, grasps, time_limit_s=config.time_limit_s, seed=scene_seed)
-        for problem in problems:
-            for name in config.planners:
-                trials.append(make_trial(problem, planner=name, planner_config=configs[name], run_seed=config.seed))
+        for problem in build_problems(scene, grasps, time_limit_s=config.time_limit_s, seed=scene_seed):
+            meta: dict[str, Any] = {"family": scene.variant, "kind": problem.kind}
+            if problem.pre_status is None:
+                pid = problem_id(problem)
+                if pid in seen:
+                    continue  # the same problem again: planned and counted once
+                seen.add(pid)
+                line = straight_line(problem)
+                meta.update(problem_id=pid, trivial=line.trivial, difficulty=round(line.collision_fraction, 6),
+                            straight_length_rad=line.length_rad)
+            yield problem, meta
         if progress is not None:
             progress(scene_seed)
-    return trials
 
 
 def failure_record(spec: TrialSpec, status: str, message: str, wall_time_s: float) -> dict[str, Any]:
@@ -124,7 +156,7 @@ def failure_record(spec: TrialSpec, status: str, message: str, wall_time_s: floa
         "q_start": None if p.q_start is None else [float(v) for v in p.q_start],
         "q_goal": None if p.q_goal is None else [float(v) for v in p.q_goal],
         "status": status, "planning_time_s": wall_time_s, "path": None, "metrics": {},
-        "stats": {"error": message},
+        "stats": {"error": message}, **spec.meta,
     }
 
 
@@ -177,9 +209,16 @@ def versions() -> dict[str, str | None]:
 def write_manifest(out: Path, config: CompareConfig, *, argv: list[str]) -> None:
     from suite.run.executors import cpu_description
 
+    dataset = None
+    if config.dataset:
+        from suite.problems.dataset import dataset_dir, parse_dataset_arg, read_manifest
+
+        name, tier = parse_dataset_arg(config.dataset)
+        dataset = {"name": name, "tier": tier, "hash": read_manifest(dataset_dir(name))["hash"]}
     manifest = {
         "command": " ".join(["python -m suite"] + argv),
         "config": dataclasses.asdict(config),
+        "dataset": dataset,
         "versions": versions(),
         "git_commit": git_commit(),
         "machine": {**cpu_description(), "platform": platform.platform()},

@@ -17,12 +17,10 @@ from typing import Any
 import numpy as np
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus
+from suite.scoring.validate import validate_path
 
 log = logging.getLogger(__name__)
 
-#: The validator's resolution: at most this much motion of any joint between two checked states.
-VALIDATION_RESOLUTION_RAD = 0.01
-ENDPOINT_TOLERANCE_RAD = 1e-6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,6 +31,9 @@ class TrialSpec:
     planner: str
     planner_config: dict[str, Any]
     problem: PlanningProblem
+    #: what the run knows of the problem, copied into its record: problem_id, family, kind,
+    #: trivial, difficulty, straight_length_rad, reference_length_rad, split (where known)
+    meta: dict[str, Any] = dataclasses.field(default_factory=dict)
 
 
 def derive_seed(*parts: Any) -> int:
@@ -79,36 +80,13 @@ def config_dict(config) -> dict[str, Any]:
     return json.loads(json.dumps(dataclasses.asdict(config), default=str))
 
 
-def validate_path(problem: PlanningProblem, path: np.ndarray | None, world) -> str | None:
-    """The independent check of a claimed solution; None if valid, else the reason.
-
-    The path must be finite (N, 7), start at q_start and end at q_goal, stay within the joint
-    limits, and be collision-free when its straight segments are checked with at most
-    VALIDATION_RESOLUTION_RAD of joint motion between states (python-fcl world).
-    """
-    if path is None:
-        return "no path"
-    path = np.asarray(path, float)
-    if path.ndim != 2 or path.shape[1] != 7 or len(path) < 1 or not np.all(np.isfinite(path)):
-        return f"path must be a finite (N, 7) array, got shape {path.shape}"
-    if np.max(np.abs(path[0] - problem.q_start)) > ENDPOINT_TOLERANCE_RAD:
-        return "path does not start at q_start"
-    if np.max(np.abs(path[-1] - problem.q_goal)) > ENDPOINT_TOLERANCE_RAD:
-        return "path does not end at q_goal"
-    lo, hi = world.robot.lower_rad, world.robot.upper_rad
-    if np.any(path < lo - 1e-9) or np.any(path > hi + 1e-9):
-        return "path leaves the joint limits"
-    bad = world.path_free(path, resolution_rad=VALIDATION_RESOLUTION_RAD)
-    if bad >= 0:
-        return f"collision at dense sample {bad}"
-    return None
-
-
-def make_trial(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int) -> TrialSpec:
+def make_trial(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int,
+               meta: dict[str, Any] | None = None) -> TrialSpec:
     """The trial of a planner on a problem, its seed derived from the run seed and the problem's
     identity (the one seeding rule of `compare`, `plan` and `execute`)."""
     p = problem.with_(seed=derive_seed(run_seed, problem.scene.key(), problem.can_id, problem.kind, planner))
-    return TrialSpec(trial_id(problem=p, planner=planner, planner_config=planner_config), planner, planner_config, p)
+    return TrialSpec(trial_id(problem=p, planner=planner, planner_config=planner_config), planner, planner_config, p,
+                     dict(meta or {}))
 
 
 def run_problem(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int) -> dict[str, Any]:
@@ -136,6 +114,7 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
         "time_limit_s": problem.time_limit_s,
         "q_start": _list(problem.q_start),
         "q_goal": _list(problem.q_goal),
+        **spec.meta,
     }
     world = collision_world(problem)
     t0 = time.perf_counter()

@@ -1,0 +1,97 @@
+"""`python -m suite dataset build|verify|show`: frozen datasets of problems with reference solutions."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from scenes.errors import SuiteError
+from suite.cli.args import nonneg_int, positive_float, positive_int
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="action", metavar="ACTION", required=True, parser_class=type(p))
+    b = sub.add_parser("build", help="draw scenes, build their problems and reference solutions, write the dataset")
+    b.add_argument("--name", required=True, help="dataset name (directory under scenes/datasets/)")
+    b.add_argument("--variants", default=None,
+                   help="comma-separated families (default open,wall,station,shelf,window,clutter)")
+    b.add_argument("--scenes", type=positive_int, default=12, help="scenes per family (default 12)")
+    b.add_argument("--cans", type=positive_int, default=5, help="cans per scene; clutter draws its own (default 5)")
+    b.add_argument("--seed", type=nonneg_int, default=0, help="first scene seed (default 0)")
+    b.add_argument("--reference-time-s", type=positive_float, default=10.0,
+                   help="AORRTC budget per non-trivial problem for its reference solution (default 10)")
+    b.add_argument("--quick-problems", type=positive_int, default=120, help="size of the quick tier (default 120)")
+    b.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
+    b.add_argument("--no-progress", action="store_true", help="no progress output")
+    v = sub.add_parser("verify", help="re-validate every reference and re-check every hash")
+    v.add_argument("name", help="dataset name")
+    s = sub.add_parser("show", help="print a dataset's composition")
+    s.add_argument("name", help="dataset name, optionally NAME:TIER")
+    s.add_argument("--json", action="store_true", help="print it as JSON")
+
+
+def run(args: argparse.Namespace) -> int:
+    return {"build": _build, "verify": _verify, "show": _show}[args.action](args)
+
+
+def _build(args: argparse.Namespace) -> int:
+    from scenes.spec import available_variants
+    from suite.run.build_dataset import BuildSettings, build_dataset
+
+    from suite.problems.dataset import dataset_dir
+
+    families = BuildSettings(name=args.name).families
+    if args.variants is not None:
+        families = tuple(v.strip() for v in args.variants.split(",") if v.strip())
+        known = available_variants()
+        bad = [f for f in families if f not in known]
+        if bad or not families:
+            raise SuiteError(f"unknown variant {bad[0] if bad else args.variants!r}; allowed: {known}")
+    dataset_dir(args.name)  # a bad name fails before any work
+    settings = BuildSettings(name=args.name, families=families, scenes=args.scenes, cans=args.cans, seed=args.seed,
+                             reference_time_s=args.reference_time_s, quick_problems=args.quick_problems,
+                             jobs=args.jobs)
+    manifest = build_dataset(settings, argv=sys.argv[1:], progress_bar=not args.no_progress)
+    c = manifest["counts"]
+    print(f"dataset {manifest['name']} ({manifest['hash']}): {c['problems']} problems in {c['scenes']} scenes, "
+          f"{c['trivial']} trivial; quick tier {len(manifest['tiers']['quick'])}; dropped {c['unsolved_dropped']} "
+          f"unsolved and {c['trivial_dropped']} trivial")
+    return 0
+
+
+def _verify(args: argparse.Namespace) -> int:
+    from suite.problems.dataset import verify_dataset
+
+    def progress(i, n):
+        if i % 50 == 0 or i == n:
+            print(f"\rverified {i}/{n}", end="", file=sys.stderr, flush=True)
+
+    counts = verify_dataset(args.name, progress=progress)
+    print(file=sys.stderr)
+    print(f"dataset {args.name}: {counts['problems']} problems in {counts['scenes']} scenes verified "
+          f"(hashes, references valid at the validator's resolution)")
+    return 0
+
+
+def _show(args: argparse.Namespace) -> int:
+    from suite.problems.dataset import load_dataset, summary
+
+    info = summary(load_dataset(args.name))
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    print(f"dataset {info['name']} (tier {info['tier']}, hash {info['hash']}): {info['problems']} problems, "
+          f"{info['distinct']} distinct, {info['trivial']} trivial ({info['trivial'] / max(info['problems'], 1):.0%})")
+    print(f"{'family':10s} {'scenes':>6s} {'problems':>8s} {'trivial':>7s}  kinds")
+    for fam, f in info["families"].items():
+        kinds = ", ".join(f"{k} {n}" for k, n in f["kinds"].items())
+        print(f"{fam:10s} {f['scenes']:6d} {f['problems']:8d} {f['trivial']:7d}  {kinds}")
+    q = info["difficulty_quantiles"]
+    print("difficulty (fraction of the straight segment in collision): "
+          + ", ".join(f"{k} {v:.3f}" for k, v in q.items()))
+    r = info["reference_over_straight_quantiles"]
+    print("reference length / straight distance: " + ", ".join(f"{k} {v:.3f}" for k, v in r.items()))
+    print("splits: " + ", ".join(f"{k} {v}" for k, v in info["splits"].items())
+          + "; tiers: " + ", ".join(f"{k} {v}" for k, v in info["tiers"].items()))
+    return 0

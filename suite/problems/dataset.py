@@ -1,0 +1,283 @@
+"""Frozen datasets: planning problems stored as data with reference solutions, hashes and a manifest.
+
+A dataset lives in `scenes/datasets/NAME/`:
+
+- `scenes.jsonl`: one line per scene (its concrete spec, seed, family and cans), stored once;
+- `problems.jsonl`: one line per distinct problem (`benchmark: true`) or stored trivial cycle step
+  left out of the benchmark (`benchmark: false`, kept so scenes can be executed): its scene, kind, `q_start`, `q_goal`, goal pose,
+  task waypoints, held can, gripper opening, removed cans, whether it is trivial, its difficulty,
+  its split, its reference solution, its `problem_id` (content hash of world and configurations)
+  and `record_hash` (hash of the whole line);
+- `manifest.json`: name, format version, dataset hash, counts, tiers, versions, build command.
+
+Loading needs no scene generation and no IK: the same problems on any machine.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from planners.base import PlanningProblem, TaskWaypoint
+from scenes.errors import SuiteError
+from scenes.scene import CanPose, HeldCan, Scene
+from suite.problems.identity import problem_id
+
+FORMAT_VERSION = 1
+DATASETS_DIR = Path(__file__).resolve().parents[2] / "scenes" / "datasets"
+SCENES_FILE, PROBLEMS_FILE, MANIFEST_FILE = "scenes.jsonl", "problems.jsonl", "manifest.json"
+#: The whole dataset's tier name (every problem).
+ALL = "all"
+
+
+def _pose(X) -> list:
+    return np.asarray(X, float).round(12).tolist()
+
+
+def scene_record(scene: Scene, *, split: str) -> dict[str, Any]:
+    """A scene as stored: its concrete spec, seed, family, split and cans."""
+    return {"scene_key": scene.key(), "family": scene.variant, "seed": scene.seed, "split": split,
+            "spec": json.loads(json.dumps(scene.spec.to_dict(), default=list)),
+            "cans": [dataclasses.asdict(c) for c in scene.cans]}
+
+
+def scene_from_record(rec: dict[str, Any]) -> Scene:
+    from scenes.spec import spec_from_dict
+
+    cans = tuple(CanPose(int(c["id"]), tuple(c["p_WC_m"]), bool(c["lying"]), float(c["axis_yaw_rad"]))
+                 for c in rec["cans"])
+    return Scene(spec_from_dict(rec["spec"]), int(rec["seed"]), cans)
+
+
+def problem_record(problem: PlanningProblem, meta: dict[str, Any]) -> dict[str, Any]:
+    """A problem as stored; `meta` adds trivial, difficulty, split and the reference."""
+    rec = {
+        "problem_id": problem_id(problem),
+        "scene_key": problem.scene.key(),
+        "family": problem.scene.variant,
+        "scene_seed": problem.scene.seed,
+        "kind": problem.kind,
+        "can_id": problem.can_id,
+        "q_start": np.asarray(problem.q_start, float).tolist(),
+        "q_goal": np.asarray(problem.q_goal, float).tolist(),
+        "X_WG_goal": _pose(problem.X_WG_goal),
+        "waypoints": [{"t": w.t, "X_WG": _pose(w.X_WG)} for w in problem.waypoints],
+        "held": None if problem.held is None else {"can_id": problem.held.can.id, "X_GC": _pose(problem.held.X_GC)},
+        "gripper_opening_m": problem.gripper_opening_m,
+        "removed_can_ids": list(problem.removed_can_ids),
+        **meta,
+    }
+    rec["record_hash"] = record_hash(rec)
+    return rec
+
+
+def record_hash(rec: dict[str, Any]) -> str:
+    """Hash of a stored problem line without its own `record_hash` field."""
+    body = {k: v for k, v in rec.items() if k != "record_hash"}
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:20]
+
+
+def problem_from_record(rec: dict[str, Any], scene: Scene, *, time_limit_s: float, seed: int = 0) -> PlanningProblem:
+    held = None
+    if rec["held"] is not None:
+        can = next(c for c in scene.cans if c.id == rec["held"]["can_id"])
+        held = HeldCan(can, np.asarray(rec["held"]["X_GC"], float))
+    return PlanningProblem(
+        kind=rec["kind"], scene=scene, can_id=int(rec["can_id"]),
+        q_start=np.asarray(rec["q_start"], float), q_goal=np.asarray(rec["q_goal"], float),
+        X_WG_goal=np.asarray(rec["X_WG_goal"], float),
+        waypoints=tuple(TaskWaypoint(float(w["t"]), np.asarray(w["X_WG"], float)) for w in rec["waypoints"]),
+        held=held, gripper_opening_m=float(rec["gripper_opening_m"]),
+        removed_can_ids=tuple(int(i) for i in rec["removed_can_ids"]), time_limit_s=time_limit_s, seed=seed,
+    )
+
+
+def dataset_hash(scene_lines: list[str], records: list[dict]) -> str:
+    h = hashlib.sha256()
+    for line in sorted(scene_lines):
+        h.update(hashlib.sha256(line.encode()).digest())
+    for rec in sorted(records, key=lambda r: r["problem_id"]):
+        h.update(rec["record_hash"].encode())
+    return h.hexdigest()[:20]
+
+
+def dataset_dir(name: str) -> Path:
+    """Where dataset NAME lives (a path with a slash is taken as the directory itself)."""
+    if "/" in name or name.startswith("."):
+        return Path(name)
+    if not name or any(c in name for c in " :\\"):
+        raise SuiteError(f"dataset name {name!r}: use letters, digits, '-' and '_'")
+    return DATASETS_DIR / name
+
+
+def parse_dataset_arg(text: str) -> tuple[str, str]:
+    """`NAME[:TIER]` -> (name, tier); the tier defaults to the whole dataset."""
+    name, _, tier = text.partition(":")
+    return name, tier or ALL
+
+
+@dataclasses.dataclass(frozen=True)
+class Dataset:
+    """A loaded dataset (or one tier of it).
+
+    Attributes:
+        name, hash, tier: what was loaded.
+        manifest: the manifest as stored.
+        ids: the problems' problem_ids, in stored order.
+        problems: the tier's problems, in the same order.
+        meta: per problem_id, the stored fields the runs report (family, kind, trivial,
+            difficulty, split, reference_length_rad).
+        references: per problem_id, the reference path (N, 7).
+        cycle_steps: the stored trivial cycle steps that are not benchmark problems, as
+            (scene_key, can_id, kind) -> (q_start, q_goal): their straight segment is valid.
+    """
+
+    name: str
+    hash: str
+    tier: str
+    manifest: dict[str, Any]
+    ids: tuple[str, ...]
+    problems: tuple[PlanningProblem, ...]
+    meta: dict[str, dict[str, Any]]
+    references: dict[str, np.ndarray]
+    cycle_steps: dict[tuple[str, int, str], tuple[list, list]] = dataclasses.field(default_factory=dict)
+
+
+META_FIELDS = ("family", "kind", "trivial", "difficulty", "straight_length_rad", "split", "reference_length_rad")
+
+
+def _read_jsonl(path: Path) -> list[tuple[int, str, dict]]:
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise SuiteError(f"cannot read {path}: {exc.strerror}") from None
+    out = []
+    for i, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            out.append((i, line, json.loads(line)))
+        except ValueError:
+            raise SuiteError(f"{path}: line {i} is not valid JSON") from None
+    return out
+
+
+def read_manifest(directory: Path) -> dict[str, Any]:
+    path = directory / MANIFEST_FILE
+    if not path.exists():
+        known = sorted(p.name for p in DATASETS_DIR.iterdir() if (p / MANIFEST_FILE).exists()) if DATASETS_DIR.exists() else []
+        raise SuiteError(f"no dataset at {str(directory)!r}; known datasets: {known}")
+    manifest = json.loads(path.read_text())
+    version = manifest.get("format_version")
+    if not isinstance(version, int) or version > FORMAT_VERSION:
+        raise SuiteError(f"{path}: dataset format version {version!r}; this suite reads versions up to {FORMAT_VERSION}")
+    return manifest
+
+
+def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
+    """Load `NAME[:TIER]` (no IK, no scene generation).
+
+    Raises:
+        SuiteError: an unknown dataset or tier, or a file that does not parse.
+    """
+    name, tier = parse_dataset_arg(text)
+    directory = dataset_dir(name)
+    manifest = read_manifest(directory)
+    tiers = manifest.get("tiers", {})
+    if tier != ALL and tier not in tiers:
+        raise SuiteError(f"dataset {name!r} has no tier {tier!r}; allowed: {[ALL, *sorted(tiers)]}")
+    wanted = None if tier == ALL else set(tiers[tier])
+    scenes = {rec["scene_key"]: rec for _, _, rec in _read_jsonl(directory / SCENES_FILE)}
+    built: dict[str, Scene] = {}
+    ids, problems, meta, refs, steps = [], [], {}, {}, {}
+    for lineno, _, rec in _read_jsonl(directory / PROBLEMS_FILE):
+        pid = rec.get("problem_id")
+        if not rec.get("benchmark", True):
+            steps[(rec["scene_key"], int(rec["can_id"]), rec["kind"])] = (rec["q_start"], rec["q_goal"])
+            continue
+        if wanted is not None and pid not in wanted:
+            continue
+        key = rec.get("scene_key")
+        if key not in scenes:
+            raise SuiteError(f"{directory / PROBLEMS_FILE}: line {lineno} (problem {pid}) names unknown scene {key!r}")
+        if key not in built:
+            built[key] = scene_from_record(scenes[key])
+        ids.append(pid)
+        problems.append(problem_from_record(rec, built[key], time_limit_s=time_limit_s))
+        meta[pid] = {"problem_id": pid, **{k: rec.get(k) for k in META_FIELDS}}
+        refs[pid] = np.asarray(rec["reference"]["path"], float)
+    return Dataset(name, manifest["hash"], tier, manifest, tuple(ids), tuple(problems), meta, refs, steps)
+
+
+def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
+    """Re-derive every problem's content hash and record hash, re-validate every reference with
+    the validator, and check the dataset hash. Raises SuiteError naming the first problem that
+    fails."""
+    from planners.worlds import collision_world
+    from suite.scoring.validate import validate_path
+
+    directory = dataset_dir(name)
+    manifest = read_manifest(directory)
+    scene_rows = _read_jsonl(directory / SCENES_FILE)
+    scenes = {rec["scene_key"]: scene_from_record(rec) for _, _, rec in scene_rows}
+    for _, _, rec in scene_rows:
+        if scenes[rec["scene_key"]].key() != rec["scene_key"]:
+            raise SuiteError(f"dataset {name!r}: scene {rec['scene_key']} does not hash to its key (edited?)")
+    records = _read_jsonl(directory / PROBLEMS_FILE)
+    for i, (lineno, _, rec) in enumerate(records):
+        pid = rec.get("problem_id")
+        if record_hash(rec) != rec.get("record_hash"):
+            raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): record hash mismatch (edited?)")
+        problem = problem_from_record(rec, scenes[rec["scene_key"]], time_limit_s=1.0)
+        if problem_id(problem) != pid:
+            raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): content does not hash to its problem_id")
+        world = collision_world(problem)
+        path = np.asarray(rec["reference"]["path"], float)
+        reason = validate_path(problem, path, world)
+        if reason is not None:
+            raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): reference rejected: {reason}")
+        length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+        if abs(length - rec["reference_length_rad"]) > 1e-6:
+            raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): reference length {length:.6f} "
+                             f"!= stored {rec['reference_length_rad']:.6f}")
+        if progress is not None:
+            progress(i + 1, len(records))
+    h = dataset_hash([line for _, line, _ in scene_rows], [rec for _, _, rec in records])
+    if h != manifest.get("hash"):
+        raise SuiteError(f"dataset {name!r}: dataset hash {h} != manifest's {manifest.get('hash')}")
+    return {"scenes": len(scene_rows), "problems": len(records)}
+
+
+def summary(ds: Dataset) -> dict[str, Any]:
+    """The composition of a loaded dataset (tier): counts per family, trivial, difficulty."""
+    fams: dict[str, dict[str, Any]] = {}
+    for pid, p in zip(ds.ids, ds.problems):
+        m = ds.meta[pid]
+        f = fams.setdefault(m["family"], {"scenes": set(), "problems": 0, "trivial": 0, "kinds": {}})
+        f["scenes"].add(p.scene.key())
+        f["problems"] += 1
+        f["trivial"] += bool(m["trivial"])
+        f["kinds"][m["kind"]] = f["kinds"].get(m["kind"], 0) + 1
+    diff = np.array([ds.meta[k]["difficulty"] for k in ds.meta], float)
+    ratio = np.array([ds.meta[k]["reference_length_rad"] / max(ds.meta[k]["straight_length_rad"], 1e-9)
+                      for k in ds.meta], float)
+    qs = (0.0, 0.25, 0.5, 0.75, 1.0)
+    return {
+        "name": ds.name, "tier": ds.tier, "hash": ds.hash,
+        "problems": len(ds.problems), "distinct": len(ds.meta),
+        "trivial": int(sum(bool(m["trivial"]) for m in ds.meta.values())),
+        "families": {k: {"scenes": len(v["scenes"]), "problems": v["problems"], "trivial": v["trivial"],
+                         "kinds": dict(sorted(v["kinds"].items()))} for k, v in sorted(fams.items())},
+        "splits": {s: sum(1 for m in ds.meta.values() if m["split"] == s) for s in sorted({m["split"] for m in ds.meta.values()})},
+        "difficulty_quantiles": dict(zip(("min", "q1", "median", "q3", "max"),
+                                         [round(float(v), 4) for v in np.quantile(diff, qs)] if len(diff) else [])),
+        "reference_over_straight_quantiles": dict(zip(("min", "q1", "median", "q3", "max"),
+                                                      [round(float(v), 4) for v in np.quantile(ratio, qs)] if len(ratio) else [])),
+        "tiers": {k: len(v) for k, v in ds.manifest.get("tiers", {}).items()},
+        "build": ds.manifest.get("build", {}),
+    }

@@ -1,0 +1,279 @@
+"""Building a frozen dataset: scenes of every family -> distinct problems -> reference solutions -> files.
+
+Steps:
+1. For each family, scenes from consecutive seeds (`scenes.generate`), ground-truth grasps, the
+   cycle's problems (`suite.problems.cycle`); problems whose goal has no IK solution are left out.
+2. Identical problems (same content hash) are kept once. Each is checked for triviality (the
+   straight joint segment passes the validator) and its difficulty measured.
+3. Every problem gets a reference solution, the shortest valid path known: for a trivial problem
+   the straight segment (no path is shorter); otherwise the best of a long AORRTC run and a few
+   RRT-Connect runs, each shortened by OMPL's simplifier and checked by the validator. A problem
+   no planner solves is left out (the dataset holds known-solvable problems only).
+4. Trivial problems are capped at `max_trivial_fraction` per family (those kept are chosen by
+   hash, not by seed order); the others stay in the files as cycle steps (`benchmark: false`), not
+   benchmark problems, so that a stored scene can still be executed in physics. Every `tune_every`-th scene of a family is in the `tune` split,
+   the others in `test`. The `quick` tier takes whole scenes of every family's test split, in
+   seed order, until it holds `quick_problems` problems.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import json
+import logging
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from scenes.errors import SuiteError
+from suite.problems.dataset import (
+    FORMAT_VERSION,
+    MANIFEST_FILE,
+    PROBLEMS_FILE,
+    SCENES_FILE,
+    dataset_dir,
+    dataset_hash,
+    problem_record,
+    scene_record,
+)
+from suite.problems.identity import problem_id, straight_line
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass(frozen=True)
+class BuildSettings:
+    """What `dataset build` makes.
+
+    Attributes:
+        name: the dataset's name (directory under scenes/datasets/).
+        families: scene families (variants) to draw scenes from.
+        scenes: scenes per family, from seeds `seed`, `seed` + 1, ...
+        cans: cans per scene (None: the family's own count).
+        seed: the first scene seed.
+        reference_time_s: AORRTC's budget per non-trivial problem (s).
+        rrt_runs: RRT-Connect runs (with full simplification) also tried per non-trivial problem.
+        max_trivial_fraction: at most this fraction of a family's problems may be trivial.
+        tune_every: every this-many-th scene of a family goes to the `tune` split.
+        quick_problems: the `quick` tier's size (whole scenes, spread over the families).
+        jobs: worker processes for the reference solutions.
+    """
+
+    name: str
+    families: tuple[str, ...] = ("open", "wall", "station", "shelf", "window", "clutter")
+    scenes: int = 12
+    cans: int | None = 5
+    seed: int = 0
+    reference_time_s: float = 10.0
+    rrt_runs: int = 3
+    max_trivial_fraction: float = 0.3
+    tune_every: int = 5
+    quick_problems: int = 120
+    jobs: int = 2
+
+
+def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple[Any, dict]]]:
+    """Scenes and their distinct, posable problems with trivial/difficulty/split filled in.
+
+    Returns:
+        (scene records, [(problem, meta)]) in family and seed order.
+    """
+    from scenes.generate import generate_scene
+    from scenes.grasp_rule import truth_grasp
+    from scenes.spec import load_spec
+    from suite.problems.cycle import build_problems
+
+    scene_recs, out, seen = [], [], set()
+    for family in settings.families:
+        spec = load_spec(variant=family)
+        if settings.cans is not None and family != "clutter":
+            spec = spec.with_can_count(settings.cans)
+        made, seed = 0, settings.seed
+        while made < settings.scenes:
+            if seed - settings.seed > 3 * settings.scenes + 10:
+                raise SuiteError(f"{family}: only {made} of {settings.scenes} scenes could be built")
+            try:
+                scene = generate_scene(spec, seed=seed)
+                problems = build_problems(scene, [truth_grasp(scene, c) for c in scene.cans],
+                                          time_limit_s=1.0, seed=seed)
+            except SuiteError as exc:
+                log.info("%s seed %d skipped: %s", family, seed, exc)
+                seed += 1
+                continue
+            split = "tune" if made % settings.tune_every == 0 else "test"
+            scene_recs.append(scene_record(scene, split=split))
+            for p in problems:
+                if p.pre_status is not None:
+                    continue
+                pid = problem_id(p)
+                if pid in seen:
+                    continue
+                seen.add(pid)
+                line = straight_line(p)
+                out.append((p, {"trivial": line.trivial, "difficulty": round(line.collision_fraction, 6),
+                                "straight_length_rad": line.length_rad, "split": split}))
+            made += 1
+            seed += 1
+            if progress is not None:
+                progress(family, made)
+    return scene_recs, out
+
+
+def reference_job(arg: tuple) -> dict[str, Any]:
+    """The shortest valid path found for one non-trivial problem (runs in a worker process)."""
+    from planners.registry import make_planner, planner_class
+    from planners.worlds import collision_world
+    from suite.run.trial import make_config
+    from suite.scoring.validate import validate_path
+
+    problem, budget_s, rrt_runs = arg
+    world = collision_world(problem)
+    attempts = [("aorrtc", {"simplifier": "rope+full", "simplify_time_s": 1.0}, budget_s, 1)]
+    attempts += [("rrt", {"simplifier": "rope+full", "simplify_time_s": 0.5}, 5.0, 100 + k) for k in range(rrt_runs)]
+    best, tried = None, []
+    for name, cfg, budget, seed in attempts:
+        t0 = time.perf_counter()
+        planner = make_planner(name, make_config(planner_class(name), cfg))
+        result = planner.plan(problem.with_(time_limit_s=budget, seed=seed))
+        elapsed = time.perf_counter() - t0
+        if result.path is None or validate_path(problem, result.path, world) is not None:
+            tried.append({"planner": name, "status": result.status.value, "time_s": round(elapsed, 3)})
+            continue
+        path = np.asarray(result.path, float)
+        length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+        tried.append({"planner": name, "status": "success", "length_rad": round(length, 6), "time_s": round(elapsed, 3)})
+        if best is None or length < best["length_rad"]:
+            best = {"path": path.round(12).tolist(), "length_rad": length, "planner": name, "config": cfg,
+                    "time_s": round(elapsed, 3)}
+    return {"reference": best, "attempts": tried}
+
+
+def _references(items: list[tuple[Any, dict]], settings: BuildSettings, *, progress_bar: bool) -> dict[str, dict]:
+    """Reference solutions of the non-trivial problems, computed in worker processes."""
+    from tqdm import tqdm
+
+    from suite.run.executors import Job, LocalExecutor
+    from suite.run.runner import worker_init
+
+    todo = [(pid, p) for pid, (p, m) in items if not m["trivial"]]
+    budget = settings.reference_time_s + 5.0 * settings.rrt_runs + 10.0
+    jobs = [Job(pid, reference_job, (p, settings.reference_time_s, settings.rrt_runs), 3 * budget + 60,
+                group=p.scene.key()) for pid, p in todo]
+    out: dict[str, dict] = {}
+    if not jobs:
+        return out
+    ex = LocalExecutor(jobs=min(settings.jobs, len(jobs)), init=worker_init)
+    bar = tqdm(total=len(jobs), desc="references", unit="problem", disable=not progress_bar, file=sys.stderr)
+    for outcome in ex.run(jobs):
+        out[outcome.job.key] = outcome.result if outcome.failure is None else {"reference": None, "attempts": [
+            {"failure": outcome.failure, "message": outcome.message}]}
+        bar.update(1)
+    bar.close()
+    return out
+
+
+def _select(items: list[tuple[str, tuple[Any, dict]]], settings: BuildSettings) -> list[tuple[str, tuple[Any, dict]]]:
+    """Cap each family's trivial problems at max_trivial_fraction (lowest hashes kept)."""
+    keep = []
+    families = sorted({p.scene.variant for _, (p, _) in items})
+    f = settings.max_trivial_fraction
+    for family in families:
+        fam = [(pid, pm) for pid, pm in items if pm[0].scene.variant == family]
+        hard = [x for x in fam if not x[1][1]["trivial"]]
+        easy = sorted((x for x in fam if x[1][1]["trivial"]), key=lambda x: x[0])
+        cap = int(np.floor(len(hard) * f / (1 - f))) if f < 1 else len(easy)
+        chosen = {pid for pid, _ in easy[:cap]} | {pid for pid, _ in hard}
+        keep += [x for x in fam if x[0] in chosen]
+    return keep
+
+
+def _quick_tier(records: list[dict], scene_recs: list[dict], settings: BuildSettings) -> list[str]:
+    """Whole test-split scenes of every family, round robin in seed order, up to quick_problems."""
+    by_scene: dict[str, list[str]] = {}
+    for r in (r for r in records if r["benchmark"]):
+        by_scene.setdefault(r["scene_key"], []).append(r["problem_id"])
+    queues = {}
+    for s in scene_recs:
+        if s["split"] == "test" and by_scene.get(s["scene_key"]):
+            queues.setdefault(s["family"], []).append(s["scene_key"])
+    tier: list[str] = []
+    while len(tier) < settings.quick_problems and any(queues.values()):
+        for family in sorted(queues):
+            if queues[family] and len(tier) < settings.quick_problems:
+                tier += by_scene[queues[family].pop(0)]
+    return tier
+
+
+def build_dataset(settings: BuildSettings, *, argv: list[str], progress_bar: bool = True) -> dict[str, Any]:
+    """Build and write the dataset; returns its manifest."""
+    from suite.run.runner import git_commit, versions
+
+    out = dataset_dir(settings.name)
+    if (out / MANIFEST_FILE).exists():
+        raise SuiteError(f"dataset {settings.name!r} already exists at {out}; choose another --name")
+    t0 = time.perf_counter()
+
+    def say(family, made):
+        if progress_bar:
+            print(f"\r{family}: {made}/{settings.scenes} scenes", end="", file=sys.stderr, flush=True)
+
+    scene_recs, items = collect(settings, progress=say)
+    if progress_bar:
+        print(file=sys.stderr)
+    t_collect = time.perf_counter() - t0
+    keyed = [(problem_id(p), (p, m)) for p, m in items]
+    refs = _references(keyed, settings, progress_bar=progress_bar)
+    t_refs = time.perf_counter() - t0 - t_collect
+    solved, unsolved = [], []
+    for pid, (p, m) in keyed:
+        if m["trivial"]:
+            # no path is shorter; stored with the exact stored configurations at its ends
+            ref = {"path": [list(map(float, p.q_start)), list(map(float, p.q_goal))], "planner": "straight",
+                   "config": {}, "time_s": 0.0}
+        else:
+            ref = refs.get(pid, {}).get("reference")
+        if ref is None:
+            unsolved.append(pid)
+            continue
+        solved.append((pid, (p, {**m, "reference": {k: ref[k] for k in ("path", "planner", "config", "time_s")},
+                                 "reference_length_rad": float(np.sum(np.linalg.norm(np.diff(np.asarray(ref["path"]), axis=0), axis=1)))})))
+    chosen = _select(solved, settings)
+    chosen_ids = {pid for pid, _ in chosen}
+    # Trivial problems left out of the benchmark are kept as cycle steps (`benchmark: false`), so
+    # that every stored scene can still be executed in physics cycle by cycle.
+    records = [problem_record(p, {**m, "benchmark": pid in chosen_ids}) for pid, (p, m) in solved]
+    used_scenes = {r["scene_key"] for r in records if r["benchmark"]}
+    records = [r for r in records if r["scene_key"] in used_scenes]
+    scene_recs = [s for s in scene_recs if s["scene_key"] in used_scenes]
+    scene_lines = [json.dumps(s, sort_keys=True) for s in scene_recs]
+    quick = _quick_tier(records, scene_recs, settings)
+    manifest = {
+        "name": settings.name,
+        "format_version": FORMAT_VERSION,
+        "hash": dataset_hash(scene_lines, records),
+        "counts": {"scenes": len(scene_recs), "problems": sum(r["benchmark"] for r in records),
+                   "trivial": sum(r["trivial"] and r["benchmark"] for r in records),
+                   "cycle_steps_stored": sum(not r["benchmark"] for r in records),
+                   "candidates": len(items), "unsolved_dropped": len(unsolved),
+                   "trivial_dropped": len(solved) - len(chosen)},
+        "tiers": {"quick": quick},
+        "splits": {"tune": f"every {settings.tune_every}th scene of each family (the first, then every {settings.tune_every}th)",
+                   "test": "the other scenes"},
+        "build": {"command": " ".join(["python -m suite", *argv]), "settings": dataclasses.asdict(settings),
+                  "versions": versions(), "git_commit": git_commit(),
+                  "built_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+                  "collect_s": round(t_collect, 1), "references_s": round(t_refs, 1)},
+    }
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = {}
+    for fname, text in ((SCENES_FILE, "\n".join(scene_lines) + "\n"),
+                        (PROBLEMS_FILE, "\n".join(json.dumps(r, sort_keys=True) for r in records) + "\n"),
+                        (MANIFEST_FILE, json.dumps(manifest, indent=1) + "\n")):
+        tmp[fname] = out / (fname + ".tmp")
+        tmp[fname].write_text(text)
+    for fname, path in tmp.items():  # the manifest last: a dataset without one does not exist
+        path.replace(out / fname)
+    return manifest

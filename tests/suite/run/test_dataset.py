@@ -1,0 +1,129 @@
+"""Frozen datasets: build small, load, verify, run; and every bad input one line."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenes.errors import SuiteError
+from suite.problems.dataset import load_dataset, summary, verify_dataset
+from suite.problems.identity import problem_id
+from suite.run.build_dataset import BuildSettings, build_dataset
+
+ROOT = Path(__file__).resolve().parents[3]
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """One `wall` scene of 2 cans: its transits and returns are non-trivial."""
+    d = tmp_path_factory.mktemp("ds") / "small"
+    settings = BuildSettings(name=str(d), families=("wall",), scenes=2, cans=2, seed=31, reference_time_s=1.0,
+                             rrt_runs=1, tune_every=2, quick_problems=4, jobs=1)
+    manifest = build_dataset(settings, argv=["dataset", "build"], progress_bar=False)
+    return d, manifest
+
+
+def test_round_trip_same_problems_and_hashes(small):
+    d, manifest = small
+    ds = load_dataset(str(d))
+    assert ds.hash == manifest["hash"] and len(ds.problems) == manifest["counts"]["problems"]
+    assert len(set(ds.ids)) == len(ds.ids)
+    for pid, p in zip(ds.ids, ds.problems):
+        assert problem_id(p) == pid  # the loaded problem hashes to what was stored
+        assert ds.meta[pid]["reference_length_rad"] >= ds.meta[pid]["straight_length_rad"] - 1e-9
+    again = load_dataset(str(d))
+    assert [problem_id(p) for p in again.problems] == list(ds.ids)
+
+
+def test_trivial_cap_and_references(small):
+    d, manifest = small
+    info = summary(load_dataset(str(d)))
+    assert info["trivial"] <= 0.3 / 0.7 * (info["problems"] - info["trivial"]) + 1e-9
+    assert info["problems"] - info["trivial"] > 0
+    ds = load_dataset(str(d))
+    for pid in ds.ids:
+        ref = ds.references[pid]
+        assert ref.shape[1] == 7 and len(ref) >= 2
+        if ds.meta[pid]["trivial"]:
+            assert len(ref) == 2  # the straight segment is the reference: nothing is shorter
+
+
+def test_quick_tier_is_a_subset_of_the_test_split(small):
+    d, manifest = small
+    quick = load_dataset(f"{d}:quick")
+    assert 0 < len(quick.problems) <= len(load_dataset(str(d)).problems)
+    assert {m["split"] for m in quick.meta.values()} == {"test"}
+
+
+def test_verify_passes_then_catches_a_hand_edit(small, tmp_path):
+    d, _ = small
+    assert verify_dataset(str(d))["problems"] > 0
+    edited = tmp_path / "edited"
+    edited.mkdir()
+    for f in d.iterdir():
+        (edited / f.name).write_text(f.read_text())
+    lines = (edited / "problems.jsonl").read_text().splitlines()
+    rec = json.loads(lines[1])
+    rec["q_goal"][0] += 0.05  # a hand edit of one goal
+    lines[1] = json.dumps(rec, sort_keys=True)
+    (edited / "problems.jsonl").write_text("\n".join(lines) + "\n")
+    with pytest.raises(SuiteError, match=rf"problem {rec['problem_id']} \(line 2\)"):
+        verify_dataset(str(edited))
+
+
+def test_verify_rejects_a_colliding_reference(small, tmp_path):
+    d, _ = small
+    edited = tmp_path / "bad-ref"
+    edited.mkdir()
+    for f in d.iterdir():
+        (edited / f.name).write_text(f.read_text())
+    lines = (edited / "problems.jsonl").read_text().splitlines()
+    k, rec = next((i, json.loads(line)) for i, line in enumerate(lines) if not json.loads(line)["trivial"])
+    rec["reference"]["path"] = [rec["q_start"], rec["q_goal"]]  # the straight segment collides
+    from suite.problems.dataset import record_hash
+
+    rec["reference_length_rad"] = float(np.linalg.norm(np.subtract(rec["q_goal"], rec["q_start"])))
+    rec["record_hash"] = record_hash(rec)  # even with a re-computed record hash
+    lines[k] = json.dumps(rec, sort_keys=True)
+    (edited / "problems.jsonl").write_text("\n".join(lines) + "\n")
+    with pytest.raises(SuiteError, match=r"reference rejected: collision"):
+        verify_dataset(str(edited))
+
+
+def test_unknown_dataset_and_tier_are_one_line(small):
+    d, _ = small
+    with pytest.raises(SuiteError, match=r"has no tier 'nope'; allowed: \['all', 'quick'\]"):
+        load_dataset(f"{d}:nope")
+    with pytest.raises(SuiteError, match=r"no dataset at .*known datasets"):
+        load_dataset("no-such-dataset")
+
+
+def compare(*args):
+    return subprocess.run([sys.executable, "-m", "suite", "compare", *args], capture_output=True, text=True,
+                          cwd=ROOT, timeout=240)
+
+
+def test_compare_runs_exactly_the_stored_problems(small, tmp_path):
+    d, manifest = small
+    out = tmp_path / "run"
+    r = compare("--dataset", f"{d}:quick", "--planners", "rrt", "--time-limit-s", "2", "--out", str(out),
+                "--no-plots", "--no-progress")
+    assert r.returncode == 0, r.stderr
+    records = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
+    quick = load_dataset(f"{d}:quick")
+    assert sorted(r["problem_id"] for r in records) == sorted(quick.ids)
+    assert all(r["reference_length_rad"] == quick.meta[r["problem_id"]]["reference_length_rad"] for r in records)
+    run_manifest = json.loads((out / "manifest.json").read_text())
+    assert run_manifest["dataset"] == {"name": str(d), "tier": "quick", "hash": manifest["hash"]}
+
+
+@pytest.mark.parametrize("flag", [["--variant", "wall"], ["--scenes", "2"], ["--cans", "1"], ["--grasps", "truth"]])
+def test_dataset_with_a_generated_scene_flag_is_one_error_line(flag, tmp_path):
+    r = compare("--dataset", "recycle-v1", *flag, "--out", str(tmp_path / "x"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert f"{flag[0]} selects generated scenes" in r.stderr and not (tmp_path / "x").exists()
