@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
         jobs_list = [int(j) for j in args.jobs_list.split(",")]
     except ValueError:
         raise SuiteError(f"--jobs-list must be integers like 1,2, got {args.jobs_list!r}") from None
-    config = CompareConfig(scenes=args.scenes, cans=args.cans)
+    config = CompareConfig(scenes=args.scenes, cans=args.cans, dataset=None)
     t0 = time.perf_counter()
     trials = prepare_trials(config)
     print(f"{len(trials)} trials ({','.join(config.planners)}, {config.scenes} {config.variant} scenes x "

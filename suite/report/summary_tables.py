@@ -16,7 +16,7 @@ from suite.report.summary_stats import (
     PairedComparison,
     summarize,
 )
-from suite.run.records import SUCCESS, planners_in, problem_key, statuses_in
+from suite.run.records import SUCCESS, planners_in, problem_counts, statuses_in
 
 
 def format_number(v: float) -> str:
@@ -55,7 +55,15 @@ def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] 
     if not records:
         return "no trial records"
     headers, rows = _rows(summarize(records, planners=planners), key=None)
-    return tabulate(rows, headers=headers, tablefmt="simple")
+    return tabulate(rows, headers=headers, tablefmt="simple") + "\n" + composition(records)
+
+
+def composition(records: Sequence[dict[str, Any]]) -> str:
+    """One line: on how many distinct problems (how many trivial) and scenes the figures rest."""
+    c = problem_counts(records)
+    trivial = (f", {c['trivial']} of them trivial (the straight joint segment is already valid)"
+               if c["known_trivial"] else "")
+    return f"{c['distinct']} distinct problems from {c['scenes']} scenes{trivial}."
 
 
 def _failure_rows(groups: Sequence[GroupSummary], statuses: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
@@ -86,14 +94,11 @@ def summary_markdown(
 ) -> str:
     """summary.md: per-planner, per-kind (and per-variant) tables, failures and paired comparisons."""
     planners = list(planners) if planners is not None else planners_in(records)
-    scenes = sorted({(int(r["scene_seed"]), str(r["variant"])) for r in records})
-    problems = {problem_key(r) for r in records}
     md = [
         f"# {title}",
         "",
-        f"{len(records)} trials: {len(planners)} planners ({', '.join(planners)}) on {len(problems)} "
-        f"planning problems from {len(scenes)} scenes. Metrics are over successful trials only: "
-        "median [first quartile, third quartile].",
+        f"{len(records)} trials: {len(planners)} planners ({', '.join(planners)}). {composition(records)} "
+        "Metrics are over successful trials only: median [first quartile, third quartile].",
         "",
         "## Per planner",
         "",
@@ -113,8 +118,8 @@ def summary_markdown(
         "",
         "## Paired comparisons",
         "",
-        "Differences A - B on the problems both planners solved (paired by scene seed, variant, can "
-        f"and problem kind): median, percentile-bootstrap 95% CI of the median ({N_RESAMPLES} "
+        "Differences A - B on the problems both planners solved (paired by problem identity): median, "
+        f"percentile-bootstrap 95% CI of the median ({N_RESAMPLES} "
         "resamples), two-sided Wilcoxon signed-rank p-value. Negative means A is lower.",
         "",
     ]

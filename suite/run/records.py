@@ -99,12 +99,27 @@ def is_success(rec: dict[str, Any]) -> bool:
     return rec.get("status") == SUCCESS
 
 
-def problem_key(rec: dict[str, Any]) -> tuple[int, str, int, str]:
-    """The identity of the planning problem: (scene_seed, variant, can_id, problem kind).
+def problem_key(rec: dict[str, Any]) -> tuple:
+    """The identity of the planning problem: its content hash (`problem_id`) where the record has
+    one, else (scene_seed, variant, can_id, problem kind) as in runs made before problems had one.
 
     Every planner of a comparison solves the same problems, so records pair on this key.
     """
+    pid = rec.get("problem_id")
+    if pid:
+        return (str(pid),)
     return (int(rec["scene_seed"]), str(rec["variant"]), int(rec["can_id"]), str(rec["problem"]))
+
+
+def problem_counts(records: Sequence[dict[str, Any]]) -> dict[str, int]:
+    """How many distinct problems the records hold, how many of them are trivial (their straight
+    segment passes the validator) and how many scenes they come from."""
+    problems: dict[tuple, bool | None] = {}
+    for r in records:
+        problems[problem_key(r)] = r.get("trivial")
+    return {"distinct": len(problems), "trivial": sum(1 for v in problems.values() if v),
+            "known_trivial": sum(1 for v in problems.values() if v is not None),
+            "scenes": len({(r.get("scene_key") or r["scene_seed"], r["variant"]) for r in records})}
 
 
 def metric(rec: dict[str, Any], name: str) -> float:

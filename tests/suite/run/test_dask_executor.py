@@ -62,7 +62,7 @@ def _outcomes(ex, jobs):
 def test_same_seed_same_records_as_local_pool(tmp_path):
     planners = ("ik", "rrt") if importlib.util.find_spec("planners.ompl_rrt") else ("ik",)
     cfg = CompareConfig(planners=planners, variant="wall", seed=3, scenes=1, cans=1, grasps="truth",
-                        time_limit_s=2.0, jobs=2)
+                        time_limit_s=2.0, jobs=2, dataset=None)
     trials = prepare_trials(cfg)
     records = {}
     for executor in ("local", "dask"):
