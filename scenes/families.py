@@ -162,8 +162,14 @@ def _draw_shelf(ranges: ShelfRanges, spec: SceneSpec, rng: np.random.Generator) 
     wp = spec.waypoints
     moved = _with_layout(spec, plate_xy=plate_xy, bin_xy=spec.bin.center_xy_m, middle_m=wp.middle_m,
                          extra=extra, above_plate_z=z_plate)
-    return dataclasses.replace(moved, waypoints=dataclasses.replace(
-        moved.waypoints, above_plate_m=(float(p_above[0]), float(p_above[1]), float(z_plate))))
+    # the top camera hangs under the board (above it, the board would hide the plate)
+    poses = dict(moved.cameras.poses)
+    if "top" in poses:
+        p = poses["top"].p_m
+        poses["top"] = CameraPose((p[0], p[1], min(p[2], top + h - 0.03)), poses["top"].target_m)
+    return dataclasses.replace(
+        moved, cameras=dataclasses.replace(moved.cameras, poses=poses),
+        waypoints=dataclasses.replace(moved.waypoints, above_plate_m=(float(p_above[0]), float(p_above[1]), float(z_plate))))
 
 
 def _draw_window(ranges: WindowRanges, spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:

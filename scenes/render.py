@@ -84,7 +84,8 @@ def render_overview(scene: Scene, *, q_iiwa: np.ndarray | None = None, width_px:
     """A 3D view of the whole station (robot, plate, bin, obstacles) from an oblique camera.
 
     The camera looks at the middle of base, plate and bin from 2.4 m away, 40 degrees above the
-    table, from the side the plate and bin face (so the robot does not hide them).
+    table, from the side the plate and bin face (so the robot does not hide them), or from the
+    robot's side when a shelf's back panel would hide the plate.
 
     Returns:
         The colour image (H, W, 3) uint8.
@@ -97,6 +98,8 @@ def render_overview(scene: Scene, *, q_iiwa: np.ndarray | None = None, width_px:
     facing = pts[1:].mean(axis=0)
     az = float(np.arctan2(facing[1], facing[0])) if np.linalg.norm(facing) > 1e-6 else 0.0
     az -= 0.6  # a little to the side, so depth reads
+    if any(o.name.startswith("shelf") for o in spec.extra):
+        az += np.pi  # a shelf's back panel faces outward: look from the robot's side instead
     d, el = 2.4, np.radians(40.0)
     eye = target + d * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
     cams = dataclasses.replace(spec.cameras, width_px=width_px, height_px=height_px,

@@ -12,6 +12,7 @@ TARGETS = {
     "planners": "suite.bench.planners",
     "compare": "suite.bench.compare",
     "execution": "suite.bench.execution",
+    "dataset": "suite.bench.dataset",
 }
 
 
