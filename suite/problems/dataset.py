@@ -214,6 +214,14 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
     return Dataset(name, manifest["hash"], tier, manifest, tuple(ids), tuple(problems), meta, refs, steps)
 
 
+def dataset_scene(name: str, scene_key: str) -> Scene:
+    """One stored scene of a dataset, by its key."""
+    for _, _, rec in _read_jsonl(dataset_dir(name) / SCENES_FILE):
+        if rec["scene_key"] == scene_key:
+            return scene_from_record(rec)
+    raise SuiteError(f"dataset {name!r} holds no scene {scene_key!r}")
+
+
 def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
     """Re-derive every problem's content hash and record hash, re-validate every reference with
     the validator, and check the dataset hash. Raises SuiteError naming the first problem that

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Sequence
@@ -9,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.patches import Circle, Rectangle
+from matplotlib.patches import Circle, Polygon, Rectangle
 
 from suite.report.plots_common import planner_colors, plt, save_figure
 from suite.run.records import is_success, joint_path
@@ -27,35 +28,56 @@ def densify_joint_path(path: np.ndarray, *, step_rad: float = 0.01) -> np.ndarra
     return np.vstack(pieces)
 
 
-def _scene_spec(manifest: dict[str, Any], variant: str, *, cans_seen: int):
-    """The run's scene spec (the manifest's spec file and can count; else the default spec with
-    as many cans as the records name)."""
+def _recorded_scene(manifest: dict[str, Any], variant: str, scene_seed: int, scene_key: str | None, *, cans_seen: int):
+    """The run's scene: from its dataset's stored scenes, or generated again as the run generated it
+    (its spec file, can count and seed). None if it cannot be had as recorded."""
+    from scenes.generate import generate_scene
     from scenes.spec import load_spec
 
+    dataset = manifest.get("dataset")
+    if dataset and scene_key:
+        from suite.problems.dataset import dataset_scene
+
+        try:
+            return dataset_scene(dataset["name"], scene_key)
+        except Exception as exc:  # the drawing is optional; the figure still shows the paths
+            log.info("scene %s not found in dataset %s: %s", scene_key, dataset["name"], exc)
+            return None
     config = manifest.get("config") or {}
-    spec = load_spec(config.get("spec"), variant=variant)
-    count = config.get("cans") if isinstance(config.get("cans"), int) else cans_seen
-    return spec.with_can_count(count) if count else spec
-
-
-def _scene_cans(spec, scene_seed: int, scene_key: str | None):
-    """The scene's cans if regenerating them (without the reachability check) gives the recorded scene."""
-    from scenes.generate import generate_scene
-
     try:
-        scene = generate_scene(spec, seed=scene_seed, check_reachable=False)
-    except Exception as exc:  # the drawing is optional; the figure still shows the paths
+        spec = load_spec(config.get("spec"), variant=variant)
+        count = config.get("cans") if isinstance(config.get("cans"), int) else cans_seen
+        scene = generate_scene(spec.with_can_count(count) if count else spec, seed=scene_seed)
+    except Exception as exc:
         log.info("cannot regenerate scene %d for drawing: %s", scene_seed, exc)
-        return ()
+        return None
     if scene_key and scene.key() != scene_key:
-        log.info("scene %d: cans redrawn for reachability in the run; not drawing them", scene_seed)
-        return ()
-    return scene.cans
+        log.info("scene %d: regenerated scene differs from the run's; not drawing the scene", scene_seed)
+        return None
+    return scene
 
 
 def _draw_box(ax, center, size, *, dims: tuple[int, int], **kw) -> None:
     i, j = dims
     ax.add_patch(Rectangle((center[i] - size[i] / 2, center[j] - size[j] / 2), size[i], size[j], **kw))
+
+
+def _draw_outline(ax, obstacle, *, dims: tuple[int, int], **kw) -> None:
+    """An obstacle primitive at any pose, as the outline of its projection on world axes `dims`."""
+    from scipy.spatial import ConvexHull
+
+    s = obstacle.size_m
+    if obstacle.shape == "box":
+        pts = np.array([[x, y, z] for x in (-s[0] / 2, s[0] / 2) for y in (-s[1] / 2, s[1] / 2) for z in (-s[2] / 2, s[2] / 2)])
+    else:
+        r, half = s[0], (s[1] / 2 if obstacle.shape == "cylinder" else s[0])
+        a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+        ring = np.column_stack([r * np.cos(a), r * np.sin(a)])
+        pts = np.vstack([np.column_stack([ring, np.full(len(a), z)]) for z in (-half, half)])
+    X = obstacle.pose()
+    p = (pts @ X[:3, :3].T + X[:3, 3])[:, list(dims)]
+    hull = p[ConvexHull(p).vertices]
+    ax.add_patch(Polygon(hull, closed=True, **kw))
 
 
 def _draw_scene(ax, spec, cans, *, dims: tuple[int, int]) -> None:
@@ -67,6 +89,14 @@ def _draw_scene(ax, spec, cans, *, dims: tuple[int, int]) -> None:
     if spec.wall is not None:
         _draw_box(ax, spec.wall.center_m, spec.wall.size_m, dims=dims, facecolor=(0.45, 0.47, 0.55, 0.45),
                   edgecolor="0.3", hatch="//", label="wall")
+    labelled = set()
+    for o in spec.extra:  # a family's obstacles: walls, window frame, shelf, distractors
+        kind = o.name.split("_")[0]
+        label = {"wall": "wall", "shelf": "shelf", "distractor": "distractor"}.get(kind, o.name)
+        _draw_outline(ax, o, dims=dims, label=None if label in labelled else label,
+                      facecolor=(0.2, 0.35, 0.75, 0.35) if kind == "distractor" else (0.45, 0.47, 0.55, 0.45),
+                      edgecolor="0.3", hatch=None if kind == "distractor" else "//")
+        labelled.add(label)
     r, h = spec.can.radius_m, spec.can.height_m
     for k, can in enumerate(cans):
         c = np.asarray(can.p_WC_m)
@@ -95,9 +125,16 @@ def plot_gripper_paths(
     robot = load_robot()
     colors = planner_colors(planners)
     scene_recs = [r for r in records if int(r["scene_seed"]) == scene_seed and r["variant"] == variant]
-    spec = _scene_spec(manifest, variant, cans_seen=1 + max((int(r["can_id"]) for r in scene_recs), default=-1))
     key = next((r.get("scene_key") for r in scene_recs if r.get("scene_key")), None)
-    cans = _scene_cans(spec, scene_seed, key)
+    scene = _recorded_scene(manifest, variant, scene_seed, key,
+                            cans_seen=1 + max((int(r["can_id"]) for r in scene_recs), default=-1))
+    if scene is None:  # draw the variant's fixed parts at least
+        from scenes.spec import load_spec
+
+        spec, cans = load_spec((manifest.get("config") or {}).get("spec"), variant=variant), ()
+        spec = dataclasses.replace(spec, family=None)
+    else:
+        spec, cans = scene.spec, scene.cans
     fig, (ax_top, ax_side) = plt.subplots(1, 2, figsize=(13, 6.2), gridspec_kw={"width_ratios": [1, 1.15]})
     _draw_scene(ax_top, spec, cans, dims=(0, 1))
     _draw_scene(ax_side, spec, cans, dims=(1, 2))
