@@ -29,6 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     s = sub.add_parser("show", help="print a dataset's composition")
     s.add_argument("name", help="dataset name, optionally NAME:TIER")
     s.add_argument("--json", action="store_true", help="print it as JSON")
+    s.add_argument("--plot", metavar="PNG", help="also draw the composition and difficulty to PNG")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,7 +78,17 @@ def _verify(args: argparse.Namespace) -> int:
 def _show(args: argparse.Namespace) -> int:
     from suite.problems.dataset import load_dataset, summary
 
-    info = summary(load_dataset(args.name))
+    if args.plot and not args.plot.lower().endswith(".png"):
+        raise SuiteError(f"--plot must name a .png file, got {args.plot!r}")
+    ds = load_dataset(args.name)
+    info = summary(ds)
+    if args.plot:
+        from pathlib import Path
+
+        from suite.report.plots_dataset import plot_dataset
+
+        Path(args.plot).parent.mkdir(parents=True, exist_ok=True)
+        plot_dataset(ds, Path(args.plot))
     if args.json:
         print(json.dumps(info))
         return 0
