@@ -22,6 +22,7 @@ COMMANDS = {
     "execute": ("suite.cli.execute", "plan one scene and execute the plans in physics: are the cans recycled?"),
     "dataset": ("suite.cli.dataset", "build, verify or show a frozen dataset of problems with reference solutions"),
     "plot": ("suite.cli.plot", "redraw the plots and tables of a run from its trials.jsonl"),
+    "rescore": ("suite.cli.rescore", "recompute every metric of a run from its stored paths, then redraw its report"),
     "bench": ("suite.cli.bench", "print speed figures (collision, perception, planners)"),
 }
 

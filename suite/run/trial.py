@@ -137,17 +137,17 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
             status = PlanStatus.INVALID_SOLUTION
             stats["invalid_reason"] = reason
         else:
-            from suite.scoring.metrics import score
+            from suite.scoring.metrics import record_metrics, score
             from suite.scoring.timing import time_parameterize
 
             timed = time_parameterize(path, robot=world.robot)
             if timed.status != "ok":
                 status = PlanStatus.TIMING_FAILED
                 stats["timing_reason"] = timed.reason
-            scored = score(path=path, world=world, X_WG_goal=problem.X_WG_goal, timed=timed)
-            # NaN (the timing metrics of an untimed path) is stored as null: JSON has no NaN.
-            metrics = {k: (float(v) if np.isfinite(v) else None) for k, v in scored.items()
-                       if isinstance(v, (int, float)) and not isinstance(v, bool)}
+            scored = score(path=path, world=world, X_WG_goal=problem.X_WG_goal, timed=timed,
+                           reference_length_rad=spec.meta.get("reference_length_rad"),
+                           reference_ee_length_m=spec.meta.get("reference_ee_length_m"))
+            metrics = record_metrics(scored)  # NaN (undefined, or timing failed) stored as null
     record.update(
         status=status.value,
         planning_time_s=planning_time_s,

@@ -1,7 +1,9 @@
 """Time parameterization of a validated joint path with TOPP-RA, identical for every planner.
 
 The validated path is piecewise linear in joint space (the collision validator checks the straight
-segments between waypoints). A cubic spline through sparse waypoints would overshoot between them
+segments between waypoints). Its polyline is simplified first (duplicate and collinear waypoints
+dropped, `suite.scoring.polyline.simplify`), so the timing depends on the path, not on how many
+waypoints describe it. A cubic spline through sparse waypoints would overshoot between them
 and leave the checked segments, so the path is first densified: every segment is cut into pieces
 of at most `TimingOptions.densify_step_rad` (L2, rad) and the spline (`toppra.SplineInterpolator`,
 not-a-knot, parameterized by joint-space arc length s in rad) goes through all those points. On the
@@ -37,6 +39,7 @@ import toppra.constraint
 from scipy.interpolate import CubicSpline
 
 from scenes.robot_model import RobotModel, load_robot
+from suite.scoring.polyline import simplify
 
 log = logging.getLogger(__name__)
 
@@ -127,15 +130,6 @@ class TimedTrajectory:
         else:
             out = _eval_const_accel(self.spline, self.s_grid, self.sd_grid, self.t_grid, t)
         return tuple(o[0] for o in out) if scalar else out
-
-
-def _dedupe(path: np.ndarray, tol_rad: float) -> np.ndarray:
-    """Drop waypoints within tol_rad (L2) of the last kept one."""
-    keep = [0]
-    for i in range(1, len(path)):
-        if np.linalg.norm(path[i] - path[keep[-1]]) > tol_rad:
-            keep.append(i)
-    return path[keep]
 
 
 def _densify(path: np.ndarray, step_rad: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -291,7 +285,9 @@ def time_parameterize(
     if not np.all(np.isfinite(path)):
         return _failed("path contains non-finite values", start, options.sample_dt_s)
     v_lim, a_lim = robot.velocity_limits_rad_s, robot.acceleration_limits_rad_s2
-    poly = _dedupe(path, options.duplicate_tol_rad)
+    # The polyline itself, whatever waypoints describe it: collinear waypoints would move the
+    # spline's knots and TOPP-RA's grid, and with them the timing, without changing the path.
+    poly = simplify(path, duplicate_tol_rad=options.duplicate_tol_rad)
     if len(poly) == 1:  # zero-length: nothing to time
         q = poly[:1].copy()
         z = np.zeros_like(q)
