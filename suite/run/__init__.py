@@ -1,1 +1,2 @@
-"""Running trials: one trial function, the runner that feeds it, the executors, and the records."""
+"""Running trials: one trial function, the runner that feeds it, the executors, the records, dataset
+building and re-scoring a saved run."""

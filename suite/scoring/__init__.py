@@ -1,2 +1,2 @@
-"""Scoring a validated path identically for every planner: TOPP-RA timing, the metrics and their
-registry (`definitions`), and re-scoring a saved run's paths (`rescore`)."""
+"""Scoring a validated path identically for every planner: the validator, TOPP-RA timing, the metrics
+and their registry (`definitions`)."""
