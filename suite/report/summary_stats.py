@@ -31,7 +31,9 @@ from suite.run.records import (
 SUMMARY_METRICS: dict[str, str] = {
     "planning_time_s": "planning time (s)",
     "path_length_rad": "path length (rad)",
-    "smoothness": "smoothness",
+    "length_ratio": "length / reference",
+    "turning_angle_rad": "turning angle (rad)",
+    "sparc": "SPARC (higher: smoother)",
     "clearance_min_m": "min clearance (m)",
     "duration_s": "duration (s)",
 }
