@@ -30,10 +30,14 @@ STATUS_COLORS = {
 BOX_METRICS = {
     "planning_time_s": ("Planning time", "time (s)", True),
     "path_length_rad": ("Joint path length", "length (rad)", False),
-    "ee_path_length_m": ("Gripper path length", "length (m)", False),
-    "smoothness": ("Smoothness", "smoothness (lower is smoother)", False),
+    "length_ratio": ("Length / reference (optimality)", "ratio (1 = best known)", False),
+    "turning_angle_rad": ("Turning angle (geometric smoothness)", "total turning (rad; 0 = straight)", False),
+    "sparc": ("SPARC of joint speed (timed smoothness)", "SPARC (higher is smoother)", False),
     "clearance_min_m": ("Minimum clearance", "clearance (m)", False),
     "duration_s": ("Trajectory duration (TOPP-RA)", "duration (s)", False),
+    "joint_margin_min_frac": ("Joint-limit margin (natural pose)", "fraction of range (higher is better)", False),
+    "manipulability_min_m3": ("Smallest manipulability (natural pose)", "sqrt(det J J^T) (m^3)", False),
+    "can_tilt_max_deg": ("Carried can's largest tilt", "tilt from vertical (deg)", False),
 }
 
 
