@@ -18,6 +18,8 @@ from suite.run.runner import TRIALS_FILE, CompareConfig
 RESULTS_DIR = Path("results")
 #: Flags that describe generated scenes (they cannot be combined with --dataset).
 GENERATED_FLAGS = ("variant", "scenes", "cans", "grasps")
+#: Settings of how a run executes, which a resumed run may change (its records do not depend on them).
+HOW_IT_RUNS = ("jobs", "executor", "scheduler")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -86,26 +88,36 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     from scenes.spec import available_variants
 
     values = dataclasses.asdict(CompareConfig())
+    given: dict[str, tuple[str, object]] = {}  # setting -> (where it was given, value)
     source = ""
     if args.config:
-        values.update(_config_file(args.config))
+        from_file = _config_file(args.config)
+        values.update(from_file)
         source = f"--config {args.config}: "
+        given.update({k: (f"--config {args.config} {k}", v) for k, v in from_file.items()})
     for key in ("variant", "seed", "scenes", "cans", "grasps", "time_limit_s", "jobs", "spec", "executor", "scheduler"):
         v = getattr(args, key)
         if v is not None:
             values[key] = v
+            given[key] = (f"--{key.replace('_', '-')}", v)
     # --seed is also the run seed, so it goes with either; the others describe generated scenes.
     generated = [f"--{k}" for k in GENERATED_FLAGS if getattr(args, k) is not None]
     if args.dataset is not None and generated:
         raise SuiteError(f"--dataset runs stored problems; {generated[0]} selects generated scenes: use one or the other")
     if args.dataset is not None:
         values["dataset"] = args.dataset
+        given["dataset"] = ("--dataset", args.dataset)
     elif generated:
         values["dataset"] = None
+        given["dataset"] = (generated[0], None)
     planners = args.planners if args.planners is not None else values["planners"]
     if isinstance(planners, (list, tuple)):
         planners = ",".join(str(p) for p in planners)
     values["planners"] = tuple(parse_planner_list(str(planners)))
+    if args.planners is not None:
+        given["planners"] = ("--planners", values["planners"])
+    if args.resume and args.out:
+        values = _resumed_settings(Path(args.out), values, given)
     if isinstance(values["time_limit_s"], int) and not isinstance(values["time_limit_s"], bool):
         values["time_limit_s"] = float(values["time_limit_s"])
     config = _validated(values, source=source)
@@ -121,6 +133,43 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
         if config.variant not in variants:
             raise SuiteError(f"unknown variant {config.variant!r}; allowed: {variants}")
     return config
+
+
+def _resumed_settings(out: Path, values: dict, given: dict[str, tuple[str, object]]) -> dict:
+    """The settings of the run being resumed, from its manifest; a setting given now that
+    contradicts them is one error line (nothing is appended to a run of another configuration)."""
+    import json
+
+    from suite.run.runner import MANIFEST_FILE
+
+    path = out / MANIFEST_FILE
+    if not path.exists():
+        return values  # an old run without a manifest: the flags stand (prepare_out checks the rest)
+    try:
+        stored = json.loads(path.read_text())["config"]
+    except (OSError, ValueError, KeyError):
+        raise SuiteError(f"--resume: {path} is not a readable run manifest") from None
+    stored.setdefault("dataset", None)  # runs made before datasets generated their scenes
+    # how the run executes may change on resume (the records do not depend on it); what it runs may not
+    for key in HOW_IT_RUNS:
+        if key in given:
+            stored.pop(key, None)
+    resumed = {**values, **{k: v for k, v in stored.items() if k in values}}
+    resumed["planners"] = tuple(resumed["planners"])
+
+    def same(a, b) -> bool:
+        if isinstance(a, (list, tuple)) or isinstance(b, (list, tuple)):
+            return list(a or []) == list(b or [])
+        if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
+            return float(a) == float(b)
+        return a == b
+
+    for key, (where, value) in given.items():
+        if key in stored and not same(value, stored[key]):
+            shown = ",".join(value) if isinstance(value, tuple) else value
+            raise SuiteError(f"--resume: {where} {shown!r} contradicts the run's {key} = {stored[key]!r} "
+                             f"({path}); resume without it, or start a new run with another --out")
+    return resumed
 
 
 def prepare_out(args: argparse.Namespace) -> Path:

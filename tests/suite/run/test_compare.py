@@ -156,3 +156,19 @@ def test_execute_runs_each_planners_plans_in_physics(tmp_path):
     assert "Execution in physics" in (out / "summary.md").read_text()
     assert (out / "plots" / "execution.png").exists()
     assert "Execution in physics" in res.stdout
+
+
+def test_resume_refuses_a_contradicting_setting_and_appends_nothing(tiny_run, tmp_path):
+    import shutil
+
+    out = tmp_path / "resumed"
+    shutil.copytree(tiny_run[0], out)
+    before = (out / "trials.jsonl").read_bytes()
+    r = compare("--out", str(out), "--resume", "--variant", "open", "--planners", "rrt,trajopt", check=False)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    assert "--variant 'open' contradicts the run's variant = 'wall'" in r.stderr
+    assert (out / "trials.jsonl").read_bytes() == before
+    # the same settings, or none, resume; how it runs (--jobs) may change
+    r = compare("--out", str(out), "--resume", "--jobs", "1", "--no-plots", "--no-progress")
+    assert r.returncode == 0, r.stderr
+    assert (out / "trials.jsonl").read_bytes() == before  # everything was already recorded
