@@ -65,13 +65,13 @@ def _verify(args: argparse.Namespace) -> int:
     from suite.problems.dataset import verify_dataset
 
     def progress(i, n):
-        if i % 50 == 0 or i == n:
+        if sys.stderr.isatty() and (i % 50 == 0 or i == n):
             print(f"\rverified {i}/{n}", end="", file=sys.stderr, flush=True)
 
     counts = verify_dataset(args.name, progress=progress)
     print(file=sys.stderr)
-    print(f"dataset {args.name}: {counts['problems']} problems in {counts['scenes']} scenes verified "
-          f"(hashes, references valid at the validator's resolution)")
+    print(f"dataset {args.name}: {counts['problems']} problems and {counts['cycle_steps']} stored cycle steps in "
+          f"{counts['scenes']} scenes verified (hashes, references valid at the validator's resolution)")
     return 0
 
 

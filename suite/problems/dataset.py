@@ -36,7 +36,8 @@ ALL = "all"
 
 
 def _pose(X) -> list:
-    return np.asarray(X, float).round(12).tolist()
+    # full precision: JSON round-trips floats exactly, so a loaded problem hashes as the built one
+    return np.asarray(X, float).tolist()
 
 
 def scene_record(scene: Scene, *, split: str) -> dict[str, Any]:
@@ -258,7 +259,8 @@ def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
     h = dataset_hash([line for _, line, _ in scene_rows], [rec for _, _, rec in records])
     if h != manifest.get("hash"):
         raise SuiteError(f"dataset {name!r}: dataset hash {h} != manifest's {manifest.get('hash')}")
-    return {"scenes": len(scene_rows), "problems": len(records)}
+    bench = sum(1 for _, _, rec in records if rec.get("benchmark", True))
+    return {"scenes": len(scene_rows), "problems": bench, "cycle_steps": len(records) - bench}
 
 
 def summary(ds: Dataset) -> dict[str, Any]:
