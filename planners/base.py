@@ -121,6 +121,10 @@ class Planner(Protocol):
 
     def plan(self, problem: PlanningProblem) -> PlanResult: ...
 
+    # Optional: `prepare(problem) -> None` builds what depends on the problem's world only (a Drake
+    # diagram, a program); the orchestrator calls it before starting the clock and records its
+    # time as `setup_time_s`, as it builds the python-fcl world of every problem outside the clock.
+
 
 def check_endpoints(problem: PlanningProblem, world) -> PlanResult | None:
     """The shared pre-check: an invalid start or goal is reported at once.

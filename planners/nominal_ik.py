@@ -197,6 +197,11 @@ class NominalIkPlanner:
             prog = remember(self._programs, key, _KnotProgram(drake_plan_scene(problem), self.config), max_items=16)
         return prog
 
+    def prepare(self, problem: PlanningProblem) -> None:
+        """Build the knot IK program of the problem's world (the orchestrator calls this before it
+        starts the clock: it depends on the world only, as the sampling planners' collision world)."""
+        self._program(problem)
+
     def _is_near(self, kind: str, t: float, t0: float, t1: float) -> bool:
         w = self.config.near_window_tu
         return (kind in _NEAR_KINDS or (kind == "approach" and t >= t1 - w - 1e-9)

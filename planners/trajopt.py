@@ -157,6 +157,11 @@ class TrajoptPlanner:
                            max_items=16)
         return hit
 
+    def prepare(self, problem: PlanningProblem) -> None:
+        """Build the plan-mode Drake scene and context of the problem's world (before the clock
+        starts: it depends on the world only, as the sampling planners' collision world)."""
+        self._plant(problem)
+
     def _via_point(self, problem: PlanningProblem, plant, plant_context, G) -> np.ndarray | None:
         """A configuration near the problem's middle task waypoint, or None.
 
