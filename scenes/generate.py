@@ -280,8 +280,10 @@ def generate_scene(spec: SceneSpec, *, seed: int, check_reachable: bool = True) 
 
     Every can lies wholly on the plate (with the edge margin), at least `min_gap_m` from every
     other can and from the drawn obstacles, upright or lying with a random yaw; with
-    `check_reachable`, every grasp and pre-grasp has a collision-free IK solution when the can's
-    turn comes in the order of the ids (see `picking_order`; unreachable cans are drawn again).
+    `check_reachable`, every grasp and pre-grasp has a collision-free IK solution (unreachable cans
+    are drawn again): with all other cans present for "random" placement (the paper's plate, as
+    before families existed), or when the can's turn comes in the order of the ids for "pickable"
+    placement (dense plates; see `picking_order`).
 
     The same seed gives the same scene: all randomness comes from one PCG64 generator.
     """
@@ -307,7 +309,11 @@ def generate_scene(spec: SceneSpec, *, seed: int, check_reachable: bool = True) 
     if not check_reachable:
         return scene
     for round_ in range(MAX_REACH_ROUNDS):
-        order, bad = picking_order(scene)
+        if spec.cans.placement == "pickable":
+            order, bad = picking_order(scene)
+        else:  # the paper's plate: every can graspable with all the others present, in any order
+            bad = unreachable_cans(scene)
+            order = [c.id for c in scene.cans]
         if not bad:
             # ids follow the picking order, so every user of the scene picks in a feasible order
             return Scene(spec, seed, tuple(dataclasses.replace(cans[i], id=k) for k, i in enumerate(order)))
