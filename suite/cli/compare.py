@@ -200,17 +200,37 @@ def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, prog
     from suite.execution.jobs import jobs_from_records, run_jobs, write_execution
     from suite.run.records import read_trials
 
-    steps = None
+    steps, shared = None, None
     if config.dataset:
         from suite.problems.dataset import load_dataset
 
         steps = load_dataset(config.dataset).cycle_steps
+        shared = _shared_steps(trials, steps)
     jobs = jobs_from_records(trials, read_trials(out / TRIALS_FILE), grasps=config.grasps,
                              time_limit_s=config.time_limit_s, seed=config.seed, reperceive=reperceive,
-                             replay_dir=out, cycle_steps=steps)
+                             replay_dir=out, cycle_steps=steps, shared_steps=shared)
     print(f"executing {len(jobs)} plan(s) in physics ({'closed loop' if reperceive else 'open loop'})...",
           file=sys.stderr)
     write_execution(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar))
+
+
+def _shared_steps(trials, steps) -> dict:
+    """Cycle steps of the run's scenes stored in the dataset once, under another scene (identical
+    content, e.g. the last return of a fixed station): (scene key, can id, kind) -> problem_id.
+    Found by posing each scene's cycle again (goal IK, as the dataset was built)."""
+    from scenes.grasp_rule import truth_grasp
+    from suite.problems.cycle import build_problems
+    from suite.problems.identity import problem_id
+
+    scenes = {t.problem.scene.key(): t.problem.scene for t in trials}
+    planned = {(t.problem.scene.key(), t.problem.can_id, t.problem.kind) for t in trials}
+    shared = {}
+    for key, scene in scenes.items():
+        for p in build_problems(scene, [truth_grasp(scene, c) for c in scene.cans], time_limit_s=1.0, seed=scene.seed):
+            k = (key, p.can_id, p.kind)
+            if p.pre_status is None and k not in planned and k not in steps:
+                shared[k] = problem_id(p)
+    return shared
 
 
 def run(args: argparse.Namespace) -> int:

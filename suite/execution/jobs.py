@@ -186,7 +186,7 @@ def _meshcat(scene: Scene):
 
 def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str, time_limit_s: float,
                       seed: int, reperceive: bool, replay_dir: Path | None,
-                      cycle_steps: dict | None = None) -> list[ExecutionJob]:
+                      cycle_steps: dict | None = None, shared_steps: dict | None = None) -> list[ExecutionJob]:
     """One job per planner and scene of a comparison run, its plans taken from the trial records.
 
     Args:
@@ -195,6 +195,8 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
         replay_dir: where to write replay_<planner>.html for each planner's first scene, or None.
         cycle_steps: a dataset's trivial cycle steps left out of its benchmark, (scene key, can
             id, kind) -> (q_start, q_goal): executed along their (validated) straight segment.
+        shared_steps: cycle steps identical to a problem the run planned for another scene,
+            (scene key, can id, kind) -> problem_id: executed along the planner's path of it.
     """
     from planners.base import PROBLEM_KINDS
 
@@ -208,6 +210,8 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
         scenes[key] = t.problem.scene
         configs[t.planner] = t.planner_config
     steps = cycle_steps or {}
+    shared = shared_steps or {}
+    by_problem = {(r["planner"], r.get("problem_id")): r for r in records if r.get("problem_id")}
     jobs, replayed = [], set()
     for (planner, key), specs in groups.items():
         by_can: dict[int, dict[str, Any]] = {}
@@ -226,6 +230,10 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
                 elif (key, can_id, kind) in steps:  # a trivial step stored outside the benchmark
                     q_start, q_goal = steps[(key, can_id, kind)]
                     path, status = [list(q_start), list(q_goal)], "success"
+                elif (planner, shared.get((key, can_id, kind))) in by_problem:  # planned once, for another scene
+                    rec = by_problem[(planner, shared[(key, can_id, kind)])]
+                    status = rec["status"]
+                    path, q_start = (rec["path"] if status == "success" else None), rec["q_start"]
                 else:
                     path, q_start, status = None, None, "not in the dataset"
                 if q_home is None and q_start is not None:
