@@ -7,7 +7,9 @@ plane.py     colour-free alternative: RANSAC plate-plane removal
 geometry.py  pinhole projection and back-projection
 normals.py   PCA normals on the organised point cloud, facing the camera
 grasps.py    Algorithm 2: vertical normals -> can centre, lying/upright, axis -> shared grasp rule
+can_model.py the can model as a test on flat tops: height, an upright disc, a lying strip
+can_discs.py can discs of known radius in a merged or partly hidden top (Hough + rim profile)
 pipeline.py  perceive(scene) -> PerceptionResult
-evaluate.py  matching to ground truth and the accuracy figures
+evaluate.py  matching to ground truth, grasps on distractors, and the accuracy figures
 debug_images.py, bench.py   pictures for people; speed figures
 """

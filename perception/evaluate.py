@@ -5,11 +5,16 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import cv2
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from perception.grasps import CanDetection
-from scenes.scene import CanPose
+from scenes.scene import CanPose, Scene
+from scenes.spec import Obstacle, SceneSpec
+
+#: obstacles a family stands on the plate among the cans (never recyclable) are named so
+DISTRACTOR_PREFIX = "distractor_"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -23,6 +28,10 @@ class SceneMatch:
         kind_correct: per match, lying/upright judged right.
         yaw_error_rad: per match of a lying can judged lying, axis error modulo pi, radians.
         top_error_m: per match, measured top height minus the true top height, metres.
+        n_distractors: distractor objects in the scene.
+        distractor_grasps: (detection id, distractor name) of each detection whose grasp lies on
+            a distractor (see `on_distractor`): a false positive of its own kind, which would
+            send the gripper onto an obstacle.
     """
 
     n_truth: int
@@ -32,6 +41,40 @@ class SceneMatch:
     kind_correct: tuple[bool, ...]
     yaw_error_rad: tuple[float, ...]
     top_error_m: tuple[float, ...]
+    n_distractors: int = 0
+    distractor_grasps: tuple[tuple[int, str], ...] = ()
+
+
+def distractors_of(spec: SceneSpec) -> tuple[Obstacle, ...]:
+    """The scene's distractors: the obstacles a family stood on the plate (`distractor_N`)."""
+    return tuple(o for o in spec.extra if o.name.startswith(DISTRACTOR_PREFIX))
+
+
+def footprint_xy(obstacle: Obstacle, *, samples: int = 32) -> np.ndarray:
+    """The obstacle's footprint on the xy plane as a convex polygon (M, 2), metres: the convex hull
+    of its outline (a box's corners, a cylinder's end circles, a sphere's equator) at its pose."""
+    size = obstacle.size_m
+    t = np.linspace(0.0, 2 * math.pi, samples, endpoint=False)
+    if obstacle.shape == "box":
+        p_O = np.array([[sx * size[0] / 2, sy * size[1] / 2, sz * size[2] / 2]
+                        for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    elif obstacle.shape == "cylinder":
+        ring = np.column_stack([size[0] * np.cos(t), size[0] * np.sin(t)])
+        p_O = np.vstack([np.column_stack([ring, np.full(samples, z)]) for z in (-size[1] / 2, size[1] / 2)])
+    elif obstacle.shape == "sphere":
+        p_O = np.column_stack([size[0] * np.cos(t), size[0] * np.sin(t), np.zeros(samples)])
+    else:
+        raise ValueError(f"obstacle {obstacle.name!r} has shape {obstacle.shape!r}; allowed: box, cylinder, sphere")
+    X = obstacle.pose()
+    p_W = p_O @ X[:3, :3].T + X[:3, 3]
+    return cv2.convexHull(p_W[:, :2].astype(np.float32)).reshape(-1, 2)
+
+
+def on_distractor(p_xy_m, obstacle: Obstacle, *, margin_m: float) -> bool:
+    """Whether a point (x, y) lies within `margin_m` of the obstacle's footprint (or inside it)."""
+    hull = footprint_xy(obstacle)
+    d = cv2.pointPolygonTest(hull.reshape(-1, 1, 2), (float(p_xy_m[0]), float(p_xy_m[1])), True)
+    return d >= -margin_m  # positive inside, negative outside: minus the distance to the outline
 
 
 def axis_error_rad(a_rad: float, b_rad: float) -> float:
@@ -47,14 +90,21 @@ def match(
     gate_m: float,
     radius_m: float,
     height_m: float,
+    distractors: tuple[Obstacle, ...] = (),
+    distractor_margin_m: float = 0.0,
 ) -> SceneMatch:
-    """Match detections to cans (Hungarian on xy distance; pairs farther than `gate_m` do not match).
+    """Match detections to cans (Hungarian on xy distance; pairs farther than `gate_m` do not match)
+    and find the grasps on distractors.
 
     Args:
         detections: the perceived cans.
         cans: the ground truth.
         gate_m: the largest xy distance of a match (e.g. the can radius).
         radius_m, height_m: the can's size (for the true top height).
+        distractors: obstacles standing among the cans that must never be grasped.
+        distractor_margin_m: a grasp this close to a distractor's footprint (or inside it) is on
+            the distractor. Below the can radius, a grasp of a can standing against a distractor
+            (its centre a radius from the footprint) is not counted.
     """
     pairs, errs, kinds, yaws, tops = [], [], [], [], []
     if detections and cans:
@@ -72,7 +122,22 @@ def match(
             tops.append(det.top_z_m - can.top_z_m(radius_m, height_m))
             if can.lying and det.lying:
                 yaws.append(axis_error_rad(det.axis_yaw_rad, can.axis_yaw_rad))
-    return SceneMatch(len(cans), len(detections), tuple(pairs), tuple(errs), tuple(kinds), tuple(yaws), tuple(tops))
+    on = []
+    for det in detections:
+        hit = next((o.name for o in distractors
+                    if on_distractor(det.grasp.X_WG[:2, 3], o, margin_m=distractor_margin_m)), None)
+        if hit is not None:
+            on.append((det.id, hit))
+    return SceneMatch(len(cans), len(detections), tuple(pairs), tuple(errs), tuple(kinds), tuple(yaws), tuple(tops),
+                      len(distractors), tuple(on))
+
+
+def match_scene(detections: list[CanDetection] | tuple[CanDetection, ...], scene: Scene) -> SceneMatch:
+    """`match` with the scene's own settings: gate one can radius, the scene's distractors, and a
+    grasp within half a can radius of a distractor's footprint counted as on it."""
+    r = scene.spec.can.radius_m
+    return match(detections, scene.cans, gate_m=r, radius_m=r, height_m=scene.spec.can.height_m,
+                 distractors=distractors_of(scene.spec), distractor_margin_m=r / 2)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,13 +157,15 @@ class Accuracy:
     yaw_error_median_deg: float
     yaw_error_p95_deg: float
     top_error_median_mm: float
+    distractors: int = 0
+    distractor_grasps: int = 0
 
     def to_json(self) -> dict:
         return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in dataclasses.asdict(self).items()}
 
     def lines(self) -> list[str]:
-        """Human-readable summary lines."""
-        return [
+        """Human-readable summary lines (the distractor line when there were distractors)."""
+        lines = [
             f"scenes {self.scenes}, cans {self.cans}, detections {self.detections}, matched {self.matched}",
             f"recall {100 * self.recall:.1f}%   precision {100 * self.precision:.1f}%",
             f"centre xy error: median {self.xy_error_median_mm:.2f} mm, p95 {self.xy_error_p95_mm:.2f} mm",
@@ -107,6 +174,9 @@ class Accuracy:
             f"p95 {self.yaw_error_p95_deg:.2f} deg",
             f"top height error: median {self.top_error_median_mm:+.2f} mm",
         ]
+        if self.distractors or self.distractor_grasps:
+            lines.append(f"grasps on distractors: {self.distractor_grasps} ({self.distractors} distractors in the scenes)")
+        return lines
 
 
 def _q(values, q: float, scale: float) -> float:
@@ -136,4 +206,6 @@ def aggregate(matches: list[SceneMatch]) -> Accuracy:
         yaw_error_median_deg=_q(yaws, 50, 180 / math.pi),
         yaw_error_p95_deg=_q(yaws, 95, 180 / math.pi),
         top_error_median_mm=_q(tops, 50, 1e3),
+        distractors=sum(m.n_distractors for m in matches),
+        distractor_grasps=sum(len(m.distractor_grasps) for m in matches),
     )

@@ -7,6 +7,12 @@ xy; the height of its top tells lying from upright (known can size); for a lying
 total-least-squares line through the strip's xy points (PCA, not a y-on-x regression, which fails
 for an axis parallel to y) gives the axis. The grasp itself comes from the shared rule in
 `scenes.grasp_rule`.
+
+Every top is checked against the can model (`perception.can_model`): its height above the plate
+(2r or h), an upright top's disc shape, a lying top's strip. Among distractors (bottles, cups,
+boxes) that tells them from cans without colour. An upright top that is no single can's disc
+(merged with a touching top at the same height, partly hidden) gets a second look for can discs of
+the known radius (`perception.can_discs`).
 """
 
 from __future__ import annotations
@@ -18,6 +24,15 @@ import math
 import cv2
 import numpy as np
 
+from perception.can_discs import find_can_discs
+from perception.can_model import (
+    disc_core_fits,
+    flat_top,
+    lying_strip_fits,
+    top_bands_m,
+    top_height_fits,
+    upright_top_fits,
+)
 from perception.crop import crop_rgb, roi_mask, work_volume_corners_W
 from perception.geometry import back_project_camera, camera_to_world, project
 from perception.normals import estimate_normals
@@ -54,6 +69,23 @@ class PerceptionParams:
             the plate's plane; what stands `min_height_above_plate_m` above it is can).
         ransac_threshold_m, ransac_iterations, ransac_seed: the plane fit's inlier distance,
             samples, and the seed of its generator (fixed, so that a frame's result is repeatable).
+        top_height_tolerance_m: a flat top farther than this from a can's top height (2r lying,
+            h upright) above the plate is no can's (a cup's, a bottle's, a box's).
+        flat_top_tolerance_m: how far from an upright top's height its flat top's points may lie.
+        min_top_area_fraction: an upright top's flat top covers at least this fraction of the
+            can's disc (a rectangle inside the disc covers at most 2/pi of it).
+        rim_tolerance_px, min_rim_fraction: at least this fraction of an upright top's outline
+            lies within this many pixels of the can's radius from its centre (a circle of the
+            can's size: a rectangle's outline is not, nor a cup's wider rim). The same fraction of
+            the ring just inside a disc that `perception.can_discs` proposes must be on the top.
+        min_disc_rim_fraction: a proposed disc's top must end at its rim along this fraction of
+            the rim open to view (a rectangle's edges follow a circle over at most about 45% of
+            it; a touching box takes about 10% from a can's).
+        min_seen_rim_fraction: a proposed disc's rim must be seen (not hidden by something higher)
+            along at least this fraction of it.
+        min_strip_length_fraction: a lying can's strip of vertical normals spans at least this
+            fraction of the can's length (its rounded ends lose a few millimetres); a shorter
+            piece (broken by depth noise, partly hidden) would put the grasp off the can's middle.
     """
 
     erode_px: int = 3
@@ -70,6 +102,14 @@ class PerceptionParams:
     ransac_threshold_m: float = 0.004
     ransac_iterations: int = 200
     ransac_seed: int = 0
+    top_height_tolerance_m: float = 0.01
+    flat_top_tolerance_m: float = 0.005
+    min_top_area_fraction: float = 0.85
+    rim_tolerance_px: float = 2.0
+    min_rim_fraction: float = 0.85
+    min_disc_rim_fraction: float = 0.75
+    min_seen_rim_fraction: float = 0.5
+    min_strip_length_fraction: float = 0.75
 
 
 @dataclasses.dataclass(frozen=True)
@@ -237,6 +277,10 @@ def detect_cans(
 ) -> tuple[list[CanDetection], FrameAnalysis]:
     """Detect the cans in a top-camera frame and compute their grasps (Algorithm 2).
 
+    Every flat top found is checked against the can model (`perception.can_model`): its height,
+    and its shape (an upright can's disc, a lying can's strip). What does not fit is no can and
+    gets no grasp: a distractor, or touching objects that could not be told apart.
+
     Args:
         image: an RGB-D frame looking down on the plate.
         spec: the scene spec (plate, can size, grasp offsets).
@@ -248,79 +292,140 @@ def detect_cans(
     fa = analyse_frame(image, spec, params)
     r, h = spec.can.radius_m, spec.can.height_m
     top_plate = spec.plate_top_z_m
-    # The top of a lying can is 2r above the plate, of an upright can h: split halfway.
-    lying_split_m = (2 * r + h) / 2
-    out: list[CanDetection] = []
+    candidates = []  # (component, point indices, upright, xy, top z)
     for k in range(1, fa.components.count + 1):
         in_comp = np.nonzero(fa.vertical & (fa.labels == k))[0]
-        for idx in _single_cans(fa, in_comp, spec=spec, params=params, lying_split_m=lying_split_m):
-            n = idx.size
-            if n < params.min_vertical_points:
-                log.debug("component %d: %d vertical points, not a can", k, n)
+        for idx, upright in _single_cans(fa, in_comp, spec=spec, params=params):
+            if idx.size < params.min_vertical_points:
+                log.debug("component %d: %d vertical points, not a can", k, idx.size)
                 continue
             pts = fa.p_W[idx]
-            xy = pts[:, :2].mean(axis=0)
             top_z = float(np.percentile(pts[:, 2], params.top_percentile))
-            lying = bool(top_z - top_plate < lying_split_m)
-            yaw = axis_yaw_tls(pts[:, :2]) if lying else 0.0
-            z = top_plate + (r if lying else h / 2)
-            overhang = footprint_overhang_m(spec, xy=xy, lying=lying, axis_yaw_rad=yaw)
-            if overhang > params.max_overhang_m:
-                # Cans stand wholly on the plate; a footprint beyond its edge is a can partly off
-                # the plate (its points beyond the edge were dropped: its estimate would be biased).
-                log.info("component %d: footprint %.1f mm beyond the plate edge, not a can on the plate",
-                         k, overhang * 1e3)
-                continue
-            if not _one_can(pts[:, :2], xy=xy, lying=lying, axis_yaw_rad=yaw, spec=spec, params=params):
+            candidates.append((k, idx, upright, pts[:, :2].mean(axis=0), top_z))
+    upright_xy = np.array([c[3] for c in candidates if c[2]]).reshape(-1, 2)
+    found = []  # (component, xy, top z, lying, yaw, vertical points)
+    second_look = []  # upright groups that are no single can's top: (component, point indices, top z)
+    for k, idx, upright, xy, top_z in candidates:
+        pts = fa.p_W[idx]
+        lying = not upright
+        if not top_height_fits(top_z - top_plate, lying=lying, spec=spec, tolerance_m=params.top_height_tolerance_m):
+            log.info("component %d: a flat top %.0f mm above the plate is no can's top; no grasp for it",
+                     k, (top_z - top_plate) * 1e3)
+            continue
+        yaw = axis_yaw_tls(pts[:, :2]) if lying else 0.0
+        if not _on_plate(spec, params, k=k, xy=xy, lying=lying, yaw=yaw):
+            continue
+        if lying:
+            if not lying_strip_fits(pts[:, :2], xy=xy, axis_yaw_rad=yaw, spec=spec,
+                                    tolerance_m=params.shape_tolerance_m,
+                                    min_length_fraction=params.min_strip_length_fraction):
                 # Never a grasp between two cans: a blob that is no single can's top is dropped.
                 log.warning("component %d: vertical points do not fit one can's top; no grasp for it", k)
                 continue
-            det_id = len(out)
-            grasp = make_grasp(
-                can_id=det_id,
-                p_xy_m=xy,
-                top_z_m=top_z,
+        elif not _single_upright_top(fa, idx, k=k, xy=xy, top_z=top_z, upright_xy=upright_xy, spec=spec, params=params):
+            second_look.append((k, idx, top_z))
+            continue
+        found.append((k, xy, top_z, lying, yaw, idx.size))
+    # Upright groups that are no single can's top (merged with a touching top at the same height,
+    # partly hidden): look for can discs in them, away from the cans found so far.
+    for k, idx, top_z in second_look:
+        taken = np.array([f[1] for f in found if not f[3]]).reshape(-1, 2)
+        discs = find_can_discs(image, fa.components.labels, k, core_rc=fa.rc[idx], top_z_m=top_z, taken_xy=taken,
+                               spec=spec, tolerance_m=params.flat_top_tolerance_m,
+                               rim_tolerance_px=params.rim_tolerance_px, min_inner_fraction=params.min_rim_fraction,
+                               min_rim_fraction=params.min_disc_rim_fraction,
+                               min_seen_fraction=params.min_seen_rim_fraction)
+        if not discs:
+            # Never a grasp between two cans or on a distractor: a top that is no can's is dropped.
+            log.info("component %d: no can's top disc in a flat top at a can's height; no grasp for it", k)
+        for xy, n in discs:
+            if _on_plate(spec, params, k=k, xy=xy, lying=False, yaw=0.0):
+                found.append((k, xy, top_z, False, 0.0, n))
+    out: list[CanDetection] = []
+    for k, xy, top_z, lying, yaw, n in found:
+        det_id = len(out)
+        grasp = make_grasp(
+            can_id=det_id,
+            p_xy_m=xy,
+            top_z_m=top_z,
+            lying=lying,
+            axis_yaw_rad=yaw,
+            top_offset_m=spec.grasp.top_offset_m,
+            pregrasp_height_m=spec.grasp.pregrasp_height_m,
+        )
+        out.append(
+            CanDetection(
+                id=det_id,
+                p_WC_m=(float(xy[0]), float(xy[1]), float(top_plate + (r if lying else h / 2))),
                 lying=lying,
-                axis_yaw_rad=yaw,
-                top_offset_m=spec.grasp.top_offset_m,
-                pregrasp_height_m=spec.grasp.pregrasp_height_m,
+                axis_yaw_rad=float(yaw),
+                top_z_m=top_z,
+                grasp=grasp,
+                n_points=int(n),
+                area_px=fa.components.areas_px[k - 1],
             )
-            out.append(
-                CanDetection(
-                    id=det_id,
-                    p_WC_m=(float(xy[0]), float(xy[1]), float(z)),
-                    lying=lying,
-                    axis_yaw_rad=float(yaw),
-                    top_z_m=top_z,
-                    grasp=grasp,
-                    n_points=int(n),
-                    area_px=fa.components.areas_px[k - 1],
-                )
-            )
+        )
     return out, fa
+
+
+def _single_upright_top(fa: FrameAnalysis, idx: np.ndarray, *, k: int, xy: np.ndarray, top_z: float,
+                        upright_xy: np.ndarray, spec: SceneSpec, params: PerceptionParams) -> bool:
+    """Whether an upright group's vertical points and flat top are one can's top disc (see
+    `perception.can_model`); `upright_xy` (M, 2) holds every upright group's centre in the frame."""
+    r = spec.can.radius_m
+    if not disc_core_fits(fa.p_W[idx, :2], xy=xy, spec=spec, tolerance_m=params.shape_tolerance_m):
+        return False
+    near = np.linalg.norm(upright_xy - xy, axis=1)
+    others = upright_xy[(near > 0) & (near < 4 * r)]  # farther ones claim no pixel of this top
+    top = flat_top(fa.image, fa.components.labels, k, core_rc=fa.rc[idx], p_WC_xy=xy, top_z_m=top_z,
+                   others_xy=others, spec=spec, tolerance_m=params.flat_top_tolerance_m,
+                   rim_tolerance_px=params.rim_tolerance_px)
+    if upright_top_fits(top, spec=spec, min_area_fraction=params.min_top_area_fraction,
+                        min_rim_fraction=params.min_rim_fraction):
+        return True
+    log.info("component %d: a flat top covering %.0f%% of a can's disc, %.0f%% of its outline on a can's rim, "
+             "is no single can's top", k, 100 * top.area_m2 / (math.pi * r * r), 100 * top.rim_fraction)
+    return False
+
+
+def _on_plate(spec: SceneSpec, params: PerceptionParams, *, k: int, xy, lying: bool, yaw: float) -> bool:
+    """Whether an estimated can's footprint stays on the plate (within `params.max_overhang_m`)."""
+    overhang = footprint_overhang_m(spec, xy=xy, lying=lying, axis_yaw_rad=yaw)
+    if overhang > params.max_overhang_m:
+        # Cans stand wholly on the plate; a footprint beyond its edge is a can partly off
+        # the plate (its points beyond the edge were dropped: its estimate would be biased).
+        log.info("component %d: footprint %.1f mm beyond the plate edge, not a can on the plate", k, overhang * 1e3)
+        return False
+    return True
 
 
 _CLOSE_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))
 
 
 def _single_cans(
-    fa: FrameAnalysis, idx: np.ndarray, *, spec: SceneSpec, params: PerceptionParams, lying_split_m: float
-) -> list[np.ndarray]:
-    """Split one component's vertical points into groups that each belong to one can.
+    fa: FrameAnalysis, idx: np.ndarray, *, spec: SceneSpec, params: PerceptionParams
+) -> list[tuple[np.ndarray, bool]]:
+    """Split one component's vertical points into groups that each belong to one can, each with
+    whether it is at an upright can's height.
 
     With the paper's gap between cans every component is one can and this returns it whole.
     Touching cans merge into one component; their tops still come apart: an upright can's top
     disc and a lying can's top strip lie at different heights; two lying cans' strips are
-    separated by the crease where their sides meet (no vertical normals there); two upright
-    cans' discs touch at most at a point, so their combined area says how many they are and
-    k-means splits them (the discs are convex and disjoint).
+    separated by the crease where their sides meet (no vertical normals there), unless they touch
+    end to end, when the strip's length says how many they are; two upright cans' discs touch at
+    most at a point, so their combined area says how many they are. k-means splits them (the
+    discs, and the strips in line, are convex and disjoint). Points in neither can top's height
+    band (`can_model.top_bands_m`, e.g. a bottle's top) belong to no can.
     """
     if idx.size == 0:
         return []
     groups = []
-    high = fa.p_W[idx, 2] - spec.plate_top_z_m >= lying_split_m
+    z = fa.p_W[idx, 2] - spec.plate_top_z_m
+    (lying_lo, lying_hi), (upright_lo, upright_hi) = top_bands_m(spec)
+    high = (z >= upright_lo) & (z <= upright_hi)
+    low = (z >= lying_lo) & (z < lying_hi) & ~high
     shape = fa.image.depth_m.shape
-    for part, upright in ((idx[high], True), (idx[~high], False)):
+    for part, upright in ((idx[high], True), (idx[low], False)):
         if part.size == 0:
             continue
         img = np.zeros(shape, np.uint8)
@@ -343,11 +448,18 @@ def _single_cans(
                 erosion_m = params.erode_px * depth_m / f
                 disc = math.pi * max(spec.can.radius_m - erosion_m, 0.5 * spec.can.radius_m) ** 2
                 count = max(1, int(round(area / disc)))
-                if count > 1:
-                    lab_k = _kmeans(fa.p_W[g, :2], count)
-                    groups.extend(g[lab_k == c] for c in range(count))
-                    continue
-            groups.append(g)
+            else:
+                # Lying cans touching end to end (axes in line) have one long strip: a can's strip
+                # is at most h long, so its length says how many they are.
+                xy = fa.p_W[g, :2]
+                a = axis_yaw_tls(xy)
+                length = float(np.ptp(xy @ np.array([math.cos(a), math.sin(a)])))
+                count = max(1, int(round(length / spec.can.height_m)))
+            if count > 1:
+                lab_k = _kmeans(fa.p_W[g, :2], count)
+                groups.extend((g[lab_k == c], upright) for c in range(count))
+                continue
+            groups.append((g, upright))
     return groups
 
 
@@ -365,17 +477,3 @@ def _kmeans(xy: np.ndarray, k: int, iterations: int = 20) -> np.ndarray:
             break
         c = new
     return lab
-
-
-def _one_can(xy_pts: np.ndarray, *, xy, lying: bool, axis_yaw_rad: float, spec: SceneSpec,
-             params: PerceptionParams) -> bool:
-    """Whether vertical points (N, 2) fit on one can's top: a disc of radius r (upright), or a
-    strip no longer than the can and no wider than its diameter (lying)."""
-    tol = params.shape_tolerance_m
-    d = xy_pts - np.asarray(xy)
-    if not lying:
-        return float(np.max(np.linalg.norm(d, axis=1))) <= spec.can.radius_m + tol
-    a = np.array([math.cos(axis_yaw_rad), math.sin(axis_yaw_rad)])
-    along = d @ a
-    across = d @ np.array([-a[1], a[0]])
-    return (float(np.ptp(along)) <= spec.can.height_m + tol) and (float(np.ptp(across)) <= 2 * spec.can.radius_m + tol)

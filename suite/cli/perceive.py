@@ -5,10 +5,14 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from suite.cli.args import add_scene_arguments, nonneg_float, positive_int, scene_from_args, spec_from_args
+
+if TYPE_CHECKING:
+    from perception.evaluate import SceneMatch
 
 log = logging.getLogger(__name__)
 
@@ -39,8 +43,20 @@ def _params(args: argparse.Namespace):
     return PerceptionParams(segmentation=args.segmentation)
 
 
+def _scene_record(seed: int, m: SceneMatch) -> dict:
+    """One scene's evaluation counts, with the grasps on distractors by detection and distractor."""
+    return {
+        "seed": seed,
+        "cans": m.n_truth,
+        "detections": m.n_detected,
+        "matched": len(m.pairs),
+        "distractors": m.n_distractors,
+        "distractor_grasps": [{"detection": d, "distractor": name} for d, name in m.distractor_grasps],
+    }
+
+
 def run(args: argparse.Namespace) -> int:
-    from perception.evaluate import aggregate, match
+    from perception.evaluate import aggregate, match_scene
     from perception.pipeline import GRASP_CAMERA, perceive
     from scenes.errors import SuiteError
 
@@ -60,10 +76,13 @@ def run(args: argparse.Namespace) -> int:
         "timing_s": {"render": round(res.render_time_s, 4), "process": round(res.process_time_s, 4)},
     }
     acc = None
+    on_distractor: dict[int, str] = {}
     if args.evaluate:
-        m = match(res.detections, scene.cans, gate_m=spec.can.radius_m, radius_m=spec.can.radius_m, height_m=spec.can.height_m)
+        m = match_scene(res.detections, scene)
         acc = aggregate([m])
+        on_distractor = dict(m.distractor_grasps)
         out["evaluation"] = acc.to_json()
+        out["distractor_grasps"] = _scene_record(scene.seed, m)["distractor_grasps"]
     if args.images:
         from perception.debug_images import write_debug_images
 
@@ -78,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         x, y, z = d.p_WC_m
         kind = f"lying, axis yaw {d.axis_yaw_rad:+.3f} rad" if d.lying else "upright"
         gx, gy, gz = d.grasp.X_WG[:3, 3]
-        print(f"  can {d.id}: {kind:28s} centre ({x:+.4f}, {y:+.4f}, {z:.4f}) m, grasp at ({gx:+.4f}, {gy:+.4f}, {gz:.4f}) m, {d.n_points} points")
+        flag = f"  ON DISTRACTOR {on_distractor[d.id]}" if d.id in on_distractor else ""
+        print(f"  can {d.id}: {kind:28s} centre ({x:+.4f}, {y:+.4f}, {z:.4f}) m, grasp at ({gx:+.4f}, {gy:+.4f}, {gz:.4f}) m, {d.n_points} points{flag}")
     if acc is not None:
         for line in acc.lines():
             print("  " + line)
@@ -90,15 +110,16 @@ def run(args: argparse.Namespace) -> int:
 def _run_many(args: argparse.Namespace) -> int:
     """Evaluate `--scenes` scenes from `--seed` on and print the aggregate figures.
 
-    A detection matches a can when their centres are within the can radius in xy.
+    A detection matches a can when their centres are within the can radius in xy; a grasp within
+    half a can radius of a distractor's footprint is a grasp on that distractor.
     """
-    from perception.evaluate import aggregate, match
+    from perception.evaluate import aggregate, match_scene
     from perception.pipeline import perceive
     from scenes.generate import generate_scene
     from scenes.errors import SuiteError
 
     spec = spec_from_args(args)
-    matches, proc_s, render_s, skipped = [], [], [], []
+    matches, records, proc_s, render_s, skipped = [], [], [], [], []
     seed = args.seed - 1
     while len(matches) < args.scenes:
         seed += 1
@@ -112,25 +133,31 @@ def _run_many(args: argparse.Namespace) -> int:
             skipped.append(seed)
             continue
         res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(seed), params=_params(args))
-        m = match(res.detections, scene.cans, gate_m=spec.can.radius_m, radius_m=spec.can.radius_m, height_m=spec.can.height_m)
+        m = match_scene(res.detections, scene)
         matches.append(m)
+        records.append(_scene_record(seed, m))
         proc_s.append(res.process_time_s)
         render_s.append(res.render_time_s)
         missed = m.n_truth - len(m.pairs)
         extra = m.n_detected - len(m.pairs)
         if missed or extra or not all(m.kind_correct):
-            log.info("seed %d: %d missed, %d extra, %d lying/upright wrong", seed, missed, extra,
-                     sum(not k for k in m.kind_correct))
+            log.info("seed %d: %d missed, %d extra (%d on distractors), %d lying/upright wrong", seed, missed, extra,
+                     len(m.distractor_grasps), sum(not k for k in m.kind_correct))
     acc = aggregate(matches)
     timing = {"render_median": round(float(np.median(render_s)), 4), "process_median": round(float(np.median(proc_s)), 4)}
     if args.json:
         print(json.dumps({"variant": spec.variant, "seeds": [args.seed, seed],
-                          "depth_noise_m": args.depth_noise_m, "segmentation": args.segmentation, "skipped_seeds": skipped, "evaluation": acc.to_json(), "timing_s": timing}))
+                          "depth_noise_m": args.depth_noise_m, "segmentation": args.segmentation, "skipped_seeds": skipped, "evaluation": acc.to_json(), "timing_s": timing,
+                          "scenes": records}))
         return 0
     print(f"variant {spec.variant}, seeds {args.seed}..{seed}, "
           f"depth noise {args.depth_noise_m} m, {args.segmentation} segmentation" + (f", skipped seeds (no scene) {skipped}" if skipped else ""))
     for line in acc.lines():
         print("  " + line)
+    for rec in records:
+        if rec["distractor_grasps"]:
+            names = ", ".join(g["distractor"] for g in rec["distractor_grasps"])
+            print(f"    seed {rec['seed']}: {len(rec['distractor_grasps'])} grasps on distractors ({names})")
     print(f"  median time per scene: render {1e3 * timing['render_median']:.0f} ms, "
           f"process {1e3 * timing['process_median']:.1f} ms")
     return 0

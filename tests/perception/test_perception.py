@@ -173,6 +173,8 @@ def test_cli_json(capsys):
     assert set(d) >= {"p_WC_m", "lying", "axis_yaw_rad", "X_WG", "X_WGpre"}
     assert d["X_WGpre"]["p_m"][2] > d["X_WG"]["p_m"][2]
     assert out["evaluation"]["recall"] == 1.0
+    assert out["evaluation"]["distractors"] == 0 and out["evaluation"]["distractor_grasps"] == 0
+    assert out["distractor_grasps"] == []
     assert out["timing_s"]["process"] > 0
 
 
