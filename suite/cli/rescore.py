@@ -12,9 +12,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from suite.report.write import write_report
     from suite.run.rescore import rescore_run
 
-    counts, table = rescore_run(args.dir, plots=not args.no_plots, seed=args.seed)
+    counts = rescore_run(args.dir)
+    table = write_report(args.dir, plots=not args.no_plots, seed=args.seed)
     print(table)
     print(counts.line())
     return 0

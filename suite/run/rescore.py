@@ -111,21 +111,18 @@ def write_trials_atomically(path: Path, records: Sequence[dict[str, Any]]) -> No
         raise
 
 
-def rescore_run(run_dir: str | Path, *, plots: bool = True, seed: int = 0) -> tuple[RescoreCounts, str]:
-    """Rescore a run directory in place, then redraw its report.
+def rescore_run(run_dir: str | Path) -> RescoreCounts:
+    """Rescore a run directory's trials.jsonl in place (the caller redraws its report).
 
     Args:
         run_dir: the run directory (trials.jsonl and manifest.json).
-        plots: also redraw the plots.
-        seed: seeds the report's bootstrap.
 
     Returns:
-        The counts and the printable summary table.
+        The counts (rescored, kept with their reasons).
 
     Raises:
         SuiteError: no such run, or trials.jsonl changed while it was being rescored.
     """
-    from suite.report.write import write_report
     from suite.run.records import TRIALS_FILE, read_manifest, read_trials
 
     run_dir = Path(run_dir)
@@ -140,4 +137,4 @@ def rescore_run(run_dir: str | Path, *, plots: bool = True, seed: int = 0) -> tu
         raise SuiteError(f"{trials} changed while it was being rescored (is the run still going?); nothing written")
     write_trials_atomically(trials, new)
     log.debug("rescored %s", trials)
-    return counts, write_report(run_dir, plots=plots, seed=seed)
+    return counts

@@ -67,7 +67,10 @@ def assert_same_metrics(got: dict, want: dict, *, rel: float) -> None:
 
 def test_rescore_reproduces_the_metrics_and_is_invariant_to_densified_paths(tmp_path, records):
     run = write_run(tmp_path / "run", records, cans=2)
-    counts, table = rescore_run(run, plots=False)
+    from suite.report.write import write_report
+
+    counts = rescore_run(run)
+    table = write_report(run, plots=False)
     with_path = [r for r in records if r["path"]]
     assert counts.rescored == counts.with_path == len(with_path) and not counts.kept
     assert "rescored 24 of 24" in counts.line() and "ik" in table
@@ -93,7 +96,7 @@ def test_rescore_reproduces_the_metrics_and_is_invariant_to_densified_paths(tmp_
     # A midpoint in every stored segment, rescored: the same values within 1%.
     dense = [{**r, "path": with_midpoints(r["path"])} if r["path"] else r for r in first]
     write_run(run, dense, cans=2)
-    rescore_run(run, plots=False)
+    rescore_run(run)
     for a, b in zip(first, read_trials(run)):
         assert_same_metrics(b["metrics"], a["metrics"], rel=0.01)
 
@@ -158,7 +161,7 @@ def test_a_dataset_run_takes_problems_and_references_from_the_dataset(tmp_path, 
     manifest = json.loads((run / "manifest.json").read_text())
     manifest["dataset"] = {"name": str(ds_dir), "tier": "all", "hash": h}
     (run / "manifest.json").write_text(json.dumps(manifest))
-    counts, _ = rescore_run(run, plots=False)
+    counts = rescore_run(run)
     assert counts.rescored == 1 and counts.kept == {"problem_id not in the dataset": 1}
     got = read_trials(run)[0]["metrics"]
     want = score(path=np.asarray(rec["path"]), world=world, X_WG_goal=X_goal, reference_length_rad=length)
