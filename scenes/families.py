@@ -73,16 +73,19 @@ def cameras_about(spec: SceneSpec, plate_xy: np.ndarray) -> dict[str, CameraPose
     return out
 
 
-def _with_layout(spec: SceneSpec, *, plate_xy, bin_xy, middle_m, extra=(), above_plate_z=None,
+def _with_layout(spec: SceneSpec, *, plate_xy, bin_xy, middle_m, extra=(), above_plate_m=None,
                  **changes) -> SceneSpec:
-    """A concrete station: plate and bin moved, waypoints and cameras derived, extras added."""
+    """A concrete station: plate and bin moved, waypoints and cameras derived, extras added.
+    The waypoint above the plate is ABOVE_PLATE_M over the plate's centre unless `above_plate_m`
+    gives it."""
     plate = dataclasses.replace(spec.plate, center_m=(float(plate_xy[0]), float(plate_xy[1]), spec.plate.center_m[2]))
     bin_ = dataclasses.replace(spec.bin, center_xy_m=(float(bin_xy[0]), float(bin_xy[1])))
     moved = dataclasses.replace(spec, plate=plate, bin=bin_)
-    z_plate = moved.plate_top_z_m + ABOVE_PLATE_M if above_plate_z is None else above_plate_z
+    if above_plate_m is None:
+        above_plate_m = (plate_xy[0], plate_xy[1], moved.plate_top_z_m + ABOVE_PLATE_M)
     waypoints = dataclasses.replace(
         spec.waypoints,
-        above_plate_m=(float(plate_xy[0]), float(plate_xy[1]), float(z_plate)),
+        above_plate_m=tuple(float(v) for v in above_plate_m),
         middle_m=tuple(float(v) for v in middle_m),
         above_bin_m=(float(bin_xy[0]), float(bin_xy[1]), float(spec.bin.outer_size_m[2] + ABOVE_BIN_M)),
     )
@@ -161,15 +164,13 @@ def _draw_shelf(ranges: ShelfRanges, spec: SceneSpec, rng: np.random.Generator) 
     p_above = plate_xy - 0.5 * d * radial
     wp = spec.waypoints
     moved = _with_layout(spec, plate_xy=plate_xy, bin_xy=spec.bin.center_xy_m, middle_m=wp.middle_m,
-                         extra=extra, above_plate_z=z_plate)
+                         extra=extra, above_plate_m=(p_above[0], p_above[1], z_plate))
     # the top camera hangs under the board (above it, the board would hide the plate)
     poses = dict(moved.cameras.poses)
     if "top" in poses:
         p = poses["top"].p_m
         poses["top"] = CameraPose((p[0], p[1], min(p[2], top + h - 0.03)), poses["top"].target_m)
-    return dataclasses.replace(
-        moved, cameras=dataclasses.replace(moved.cameras, poses=poses),
-        waypoints=dataclasses.replace(moved.waypoints, above_plate_m=(float(p_above[0]), float(p_above[1]), float(z_plate))))
+    return dataclasses.replace(moved, cameras=dataclasses.replace(moved.cameras, poses=poses))
 
 
 def _draw_window(ranges: WindowRanges, spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:

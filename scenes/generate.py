@@ -4,6 +4,7 @@ from each other and from the obstacles, and all graspable."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 
@@ -91,6 +92,19 @@ def _place(rng, spec, can_id, others, lying: bool) -> CanPose | None:
     return None
 
 
+@functools.lru_cache(maxsize=4)
+def _gripper_parts(open_width_m: float) -> tuple:
+    """The open gripper's primitives and link 7's (rigid with it) in the gripper frame G:
+    (kind, dims, X_GS). Parsed once per process, not once per candidate can."""
+    from scenes.robot_model import load_robot
+
+    robot = load_robot()
+    finger_X = robot.finger_offsets(open_width_m)
+    X_G7 = np.linalg.inv(robot.X_7G)  # link 7 is rigid with the gripper; its shapes reach the tall distractors
+    return tuple((s.kind, s.dims, (X_G7 if s.body == "iiwa_link_7" else finger_X.get(s.body, np.eye(4))) @ s.X_BS)
+                 for s in robot.shapes if s.body in ("iiwa_link_7", "body", "left_finger", "right_finger"))
+
+
 def _gripper_clear(can: CanPose, others, spec: SceneSpec) -> bool:
     """The open gripper (with link 7, rigid with it) descending from the can's pre-grasp to its
     grasp (the grasp rule's poses) touches neither the other cans nor the drawn obstacles."""
@@ -98,14 +112,9 @@ def _gripper_clear(can: CanPose, others, spec: SceneSpec) -> bool:
 
     from scenes.fcl_shapes import fcl_geometry
     from scenes.grasp_rule import truth_grasp
-    from scenes.robot_model import load_robot
 
-    robot = load_robot()
-    finger_X = robot.finger_offsets(spec.grasp.open_width_m)
     g = truth_grasp(Scene(spec, 0, (can,)), can)
-    X_G7 = np.linalg.inv(robot.X_7G)  # link 7 is rigid with the gripper; its shapes reach the tall distractors
-    parts = [(s.kind, s.dims, (X_G7 if s.body == "iiwa_link_7" else finger_X.get(s.body, np.eye(4))) @ s.X_BS)
-             for s in robot.shapes if s.body in ("iiwa_link_7", "body", "left_finger", "right_finger")]
+    parts = _gripper_parts(spec.grasp.open_width_m)
     obstacles = []
     for o in others:
         X = o.X_WC()

@@ -75,11 +75,11 @@ class BuildSettings:
     jobs: int = 2
 
 
-def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple[Any, dict]]]:
+def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple[str, Any, dict]]]:
     """Scenes and their distinct, posable problems with trivial/difficulty/split filled in.
 
     Returns:
-        (scene records, [(problem, meta)]) in family and seed order.
+        (scene records, [(problem_id, problem, meta)]) in family and seed order.
     """
     from scenes.generate import generate_scene
     from scenes.grasp_rule import truth_grasp
@@ -113,7 +113,7 @@ def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple
                     continue
                 seen.add(pid)
                 line = straight_line(p)
-                out.append((p, {"trivial": line.trivial, "difficulty": round(line.collision_fraction, 6),
+                out.append((pid, p, {"trivial": line.trivial, "difficulty": round(line.collision_fraction, 6),
                                 "straight_length_rad": line.length_rad, "split": split}))
             made += 1
             seed += 1
@@ -224,7 +224,7 @@ def build_dataset(settings: BuildSettings, *, argv: list[str], progress_bar: boo
     if progress_bar:
         print(file=sys.stderr)
     t_collect = time.perf_counter() - t0
-    keyed = [(problem_id(p), (p, m)) for p, m in items]
+    keyed = [(pid, (p, m)) for pid, p, m in items]
     refs = _references(keyed, settings, progress_bar=progress_bar)
     t_refs = time.perf_counter() - t0 - t_collect
     solved, unsolved = [], []

@@ -118,25 +118,21 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
     }
     t_setup = time.perf_counter()
     world = collision_world(problem)
-    planner = None
+    result = None
     try:
         cls = planner_class(spec.planner)
         planner = cls(make_config(cls, spec.planner_config))
         if hasattr(planner, "prepare"):  # world-only set-up, outside the clock for every planner alike
             planner.prepare(problem)
-    except Exception:  # reported below, as the planner's error
-        planner = None
+    except Exception as exc:  # a bad config or a planner bug is this trial's error, not the run's
+        result = _error_result(spec, exc)
     record["setup_time_s"] = time.perf_counter() - t_setup
     t0 = time.perf_counter()
-    try:
-        if planner is None:
-            cls = planner_class(spec.planner)
-            planner = cls(make_config(cls, spec.planner_config))
-        result = planner.plan(problem)
-    except Exception as exc:  # a planner bug is this trial's error, not the run's
-        log.debug("planner %s raised on %s", spec.planner, problem.name, exc_info=True)
-        result = PlanResult(PlanStatus.ERROR, None, {"error": f"{type(exc).__name__}: {exc}",
-                                                     "traceback": traceback.format_exc(limit=5)})
+    if result is None:
+        try:
+            result = planner.plan(problem)
+        except Exception as exc:
+            result = _error_result(spec, exc)
     planning_time_s = time.perf_counter() - t0
     status = PlanStatus(result.status)
     stats = dict(result.stats)
@@ -168,6 +164,13 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
         stats=_jsonable(stats),
     )
     return record
+
+
+def _error_result(spec: TrialSpec, exc: Exception) -> PlanResult:
+    """A planner that raised: an ERROR result carrying the exception and its traceback."""
+    log.debug("planner %s raised on %s", spec.planner, spec.problem.name, exc_info=True)
+    return PlanResult(PlanStatus.ERROR, None, {"error": f"{type(exc).__name__}: {exc}",
+                                               "traceback": traceback.format_exc(limit=5)})
 
 
 def _list(q) -> list[float] | None:
