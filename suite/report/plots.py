@@ -1,7 +1,8 @@
 """The run's figures, drawn from the saved trial records alone (PNG, matplotlib Agg).
 
 Each planner keeps one colour in every figure (`plots_common.planner_colors`). `make_plots(run_dir)`
-draws: metric box plots, outcomes by status, the planning-time CDF (`plots_stats`), the gripper's
+draws: metric box plots, the natural-poses panel, outcomes by status, the planning-time CDF
+(`plots_stats`), success rate and length ratio per scene family (`plots_families`), the gripper's
 paths over the scene (top and side views) and the timed joint position and velocity profiles of
 one motion (`plots_paths`), and where the cans ended in physics (`plots_execution`).
 """
@@ -15,7 +16,8 @@ from pathlib import Path
 from suite.report.plots_common import PLOTS_DIR
 from suite.report.plots_execution import plot_execution
 from suite.report.plots_paths import plot_gripper_paths, plot_joint_profiles
-from suite.report.plots_stats import plot_metric_boxes, plot_outcomes, plot_time_cdf
+from suite.report.plots_families import plot_length_ratio_by_family, plot_success_by_family
+from suite.report.plots_stats import NATURAL_POSE_METRICS, plot_metric_boxes, plot_outcomes, plot_time_cdf
 from suite.run.records import (
     is_success,
     planners_in,
@@ -52,6 +54,10 @@ def make_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None,
         plot_metric_boxes(records, planners=planners, path=out_dir / "metrics_boxplots.png"),
         plot_outcomes(records, planners=planners, path=out_dir / "outcomes.png"),
         plot_time_cdf(records, planners=planners, path=out_dir / "planning_time_cdf.png"),
+        plot_success_by_family(records, planners=planners, path=out_dir / "success_by_family.png"),
+        plot_length_ratio_by_family(records, planners=planners, path=out_dir / "length_ratio_by_family.png"),
+        plot_metric_boxes(records, planners=planners, path=out_dir / "natural_poses.png", panels=NATURAL_POSE_METRICS,
+                          title="Natural poses (the seed paper's question) over each planner's solved problems"),
     ]
     # the first scene (lowest seed) of each variant: the same file names whatever order trials finished in
     firsts: dict[str, int] = {}

@@ -28,8 +28,9 @@ BUILTIN_COLORS = {
     "bitstar": "#9467bd",
     "aorrtc": "#8c564b",
     "prm": "#e377c2",
+    "gcs": "#17becf",
 }
-SPARE_COLORS = ("#17becf", "#bcbd22", "#7f7f7f", "#393b79", "#637939", "#843c39", "#7b4173")
+SPARE_COLORS = ("#bcbd22", "#7f7f7f", "#393b79", "#637939", "#843c39", "#7b4173")
 
 
 def planner_colors(planners: Sequence[str]) -> dict[str, str]:

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.patches import Patch
 
+from suite.report.outcomes import outcomes
 from suite.report.plots_common import planner_colors, plt, save_figure
 from suite.run.records import SUCCESS, metric_values, problem_kinds_in, statuses_in
 
@@ -35,9 +36,15 @@ BOX_METRICS = {
     "sparc": ("SPARC of joint speed (timed smoothness)", "SPARC (higher is smoother)", False),
     "clearance_min_m": ("Minimum clearance", "clearance (m)", False),
     "duration_s": ("Trajectory duration (TOPP-RA)", "duration (s)", False),
-    "joint_margin_min_frac": ("Joint-limit margin (natural pose)", "fraction of range (higher is better)", False),
-    "manipulability_min_m3": ("Smallest manipulability (natural pose)", "sqrt(det J J^T) (m^3)", False),
-    "can_tilt_max_deg": ("Carried can's largest tilt", "tilt from vertical (deg)", False),
+    "ee_path_length_m": ("Gripper path length", "length (m)", False),
+}
+
+#: The "natural poses" panel (the seed paper's question): metric -> (title, axis label, log scale).
+NATURAL_POSE_METRICS = {
+    "joint_margin_min_frac": ("Smallest joint-limit margin", "fraction of the joint's range (higher: better)", False),
+    "posture_distance_mean_rad": ("Mean distance from the comfortable posture", "rad (lower: better)", False),
+    "manipulability_min_m3": ("Smallest manipulability", "sqrt(det J J^T) (m^3; higher: better)", False),
+    "can_tilt_max_deg": ("Carried can's largest tilt", "deg from vertical (lower: better)", False),
 }
 
 
@@ -45,18 +52,33 @@ def _no_data(ax, text: str = "no successful trials") -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.4")
 
 
-def plot_metric_boxes(records: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path:
-    """Box plots of each metric by planner over successful trials, with the points and n shown."""
+def _problem_values(records: Sequence[dict], planner: str, name: str) -> np.ndarray:
+    """One value per distinct problem the planner solved (the median of its successful trials)."""
+    vals = np.array([o.metrics[name] for o in outcomes([r for r in records if r["planner"] == planner],
+                                                        metrics=(name,)).values()], dtype=float)
+    return vals[np.isfinite(vals)]
+
+
+def plot_metric_boxes(records: Sequence[dict], *, planners: Sequence[str], path: Path,
+                      panels: dict[str, tuple[str, str, bool]] | None = None, title: str | None = None) -> Path:
+    """Box plots of each metric by planner, one dot per solved distinct problem, with n shown.
+
+    Args:
+        panels: metric -> (title, axis label, log scale); default `BOX_METRICS`.
+        title: the figure's title.
+    """
+    panels = panels or BOX_METRICS
     colors = planner_colors(planners)
-    names = [m for m in BOX_METRICS if any(len(metric_values([r for r in records if r["planner"] == p], m)) for p in planners)]
-    names = names or list(BOX_METRICS)[:1]
+    values = {(p, m): _problem_values(records, p, m) for p in planners for m in panels}
+    names = [m for m in panels if any(len(values[p, m]) for p in planners)]
+    names = names or list(panels)[:1]
     ncols = min(3, len(names))
     nrows = math.ceil(len(names) / ncols)
     fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.9 * nrows), squeeze=False)
     rng = np.random.default_rng(0)  # jitter of the points only
     for ax, name in zip(axes.flat, names):
-        title, ylabel, log_y = BOX_METRICS[name]
-        data = [metric_values([r for r in records if r["planner"] == p], name) for p in planners]
+        panel_title, ylabel, log_y = panels[name]
+        data = [values.get((p, name), np.array([])) for p in planners]
         pos = np.arange(1, len(planners) + 1)
         shown = [i for i, d in enumerate(data) if len(d)]
         if shown:
@@ -74,12 +96,13 @@ def plot_metric_boxes(records: Sequence[dict], *, planners: Sequence[str], path:
         ax.set_xlim(0.4, len(planners) + 0.6)
         if log_y and shown and all(np.all(data[i] > 0) for i in shown):
             ax.set_yscale("log")
-        ax.set_title(title)
+        ax.set_title(panel_title)
         ax.set_ylabel(ylabel)
         ax.grid(axis="y", alpha=0.3)
     for ax in list(axes.flat)[len(names):]:
         ax.set_visible(False)
-    fig.suptitle("Metrics of the successful trials by planner (box: quartiles and median; dots: trials)")
+    fig.suptitle(title or "Metrics by planner over its solved problems (box: quartiles and median; "
+                 "dots: distinct problems)")
     fig.tight_layout()
     return save_figure(fig, path)
 

@@ -8,6 +8,7 @@ trial records alone (see `suite.run.records`).
 from __future__ import annotations
 
 import csv
+import json
 import logging
 import math
 from collections.abc import Sequence
@@ -16,29 +17,99 @@ from typing import Any
 
 import numpy as np
 
+from suite.report.outcomes import FEW_PROBLEMS
 from suite.report.summary_execution import EXECUTION_INTRO, execution_table
 from suite.report.summary_stats import (
     SUMMARY_METRICS,
     GroupSummary,
+    MetricStats,
+    PairedComparison,
+    common_subset_stats,
     paired_comparisons,
     summarize,
 )
 from suite.report.summary_tables import summary_markdown
-from suite.run.records import STATUSES, planners_in
+from suite.run.records import STATUSES, planners_in, problem_counts
 
 log = logging.getLogger(__name__)
 
+#: summary.json's format; a reader refuses a newer one.
+SUMMARY_FORMAT_VERSION = 1
+#: The success-aware time's name in summary.csv and summary.json.
+TIME_TO_SOLVE = "time_to_solve_s"
+
+
+def _num(v: float) -> float | None:
+    return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else None
+
+
+def _stats_json(s: MetricStats) -> dict[str, Any]:
+    return {"median": _num(s.median), "q1": _num(s.q1), "q3": _num(s.q3), "n": s.n}
+
+
+def _success_json(g: GroupSummary) -> dict[str, Any]:
+    return {"k": g.successes, "n": g.n, "rate": _num(g.success_rate), "ci95": [_num(v) for v in g.success_ci95],
+            "trials": g.trials}
+
+
+def summary_json(
+    records: Sequence[dict[str, Any]], *, pairs: Sequence[PairedComparison], planners: Sequence[str]
+) -> dict[str, Any]:
+    """The machine-readable summary: the same numbers as summary.md, NaN written as null.
+
+    Keys: distinct_problems, scenes, trivial_problems, few_problems (fewer than FEW_PROBLEMS),
+    planners: {NAME: {success: {k, n, rate, ci95, trials}, status_counts, metrics: {METRIC: {median,
+    q1, q3, n}}, time_to_solve_s, common_subset: {METRIC: {median, n}}, by_family: {FAMILY: {success,
+    metrics}}, by_kind: {KIND: {success, metrics}}}}, metrics (their definitions), paired: [...].
+    """
+    counts = problem_counts(records)
+    common = common_subset_stats(records, planners=planners)
+    out: dict[str, Any] = {
+        "format_version": SUMMARY_FORMAT_VERSION,
+        "distinct_problems": counts["distinct"],
+        "scenes": counts["scenes"],
+        "trivial_problems": counts["trivial"] if counts["known_trivial"] else None,
+        "few_problems": counts["distinct"] < FEW_PROBLEMS,
+        "unit": "distinct problem (repeats of one problem count once)",
+        "metrics": {m: SUMMARY_METRICS[m] for m in SUMMARY_METRICS},
+        "planners": {},
+    }
+    split = {by: summarize(records, by=by, planners=planners) for by in ("problem", "variant")}
+    for g in summarize(records, planners=planners):
+        p = g.planner
+        out["planners"][p] = {
+            "success": _success_json(g),
+            "status_counts": g.status_counts,
+            "metrics": {m: _stats_json(g.metrics[m]) for m in SUMMARY_METRICS},
+            TIME_TO_SOLVE: _stats_json(g.time_to_solve),
+            "common_subset": {m: {"median": _num(common[m][p].median), "n": common[m][p].n} for m in SUMMARY_METRICS},
+            "by_family": {h.variant: {"success": _success_json(h),
+                                      "metrics": {m: _stats_json(h.metrics[m]) for m in SUMMARY_METRICS}}
+                          for h in split["variant"] if h.planner == p},
+            "by_kind": {h.problem: {"success": _success_json(h),
+                                    "metrics": {m: _stats_json(h.metrics[m]) for m in SUMMARY_METRICS}}
+                        for h in split["problem"] if h.planner == p},
+        }
+    out["paired"] = [
+        {"metric": c.metric, "a": c.planner_a, "b": c.planner_b, "n": c.n, "scenes": c.scenes,
+         "median_diff": _num(c.median_diff), "ci95": [_num(c.ci_low), _num(c.ci_high)], "p_value": _num(c.p_value),
+         "ci_method": "percentile bootstrap resampling scenes", "few": c.few}
+        for c in pairs
+    ]
+    return out
+
 
 def _csv_rows(groups: Sequence[GroupSummary]) -> tuple[list[str], list[list[Any]]]:
-    headers = ["planner", "problem", "variant", "n", "successes", "success_rate"]
-    for m in SUMMARY_METRICS:
+    headers = ["planner", "problem", "variant", "n", "successes", "success_rate", "success_ci95_low",
+               "success_ci95_high", "trials"]
+    for m in (*SUMMARY_METRICS, TIME_TO_SOLVE):
         headers += [f"{m}_n", f"{m}_median", f"{m}_q1", f"{m}_q3"]
     headers += [f"status_{s}" for s in STATUSES]
     rows = []
     for g in groups:
-        row: list[Any] = [g.planner, g.problem, g.variant, g.n, g.successes, g.success_rate]
-        for m in SUMMARY_METRICS:
-            s = g.metrics[m]
+        row: list[Any] = [g.planner, g.problem, g.variant, g.n, g.successes, g.success_rate, *g.success_ci95,
+                          g.trials]
+        for s in (*(g.metrics[m] for m in SUMMARY_METRICS), g.time_to_solve):
             row += [s.n, s.median, s.q1, s.q3]
         row += [g.status_counts.get(s, 0) for s in STATUSES]
         rows.append(row)
@@ -62,7 +133,8 @@ def write_summary(
     title: str | None = None,
     executions: Sequence[dict[str, Any]] = (),
 ) -> list[Path]:
-    """Write summary.md, summary.csv (per planner, per planner x kind, per planner x variant) and paired.csv.
+    """Write summary.md, summary.json, summary.csv (per planner, per planner x kind, per planner x
+    family) and paired.csv.
 
     Args:
         run_dir: the run directory to write into.
@@ -79,10 +151,13 @@ def write_summary(
     planners = list(planners) if planners is not None else planners_in(records)
     pairs = paired_comparisons(records, rng=np.random.default_rng(seed), planners=planners)
     md_path, csv_path, paired_path = run_dir / "summary.md", run_dir / "summary.csv", run_dir / "paired.csv"
+    json_path = run_dir / "summary.json"
     md = summary_markdown(records, pairs=pairs, planners=planners, title=title or f"Run summary: {run_dir.name}")
     if executions:
         md += "\n" + EXECUTION_INTRO + "\n" + execution_table(executions, planners=planners) + "\n"
     md_path.write_text(md, encoding="utf-8")
+    json_path.write_text(json.dumps(summary_json(records, pairs=pairs, planners=planners), indent=1) + "\n",
+                         encoding="utf-8")
     groups = [
         *summarize(records, planners=planners),
         *summarize(records, by="problem", planners=planners),
@@ -91,8 +166,9 @@ def write_summary(
     _write_csv(csv_path, *_csv_rows(groups))
     _write_csv(
         paired_path,
-        ["metric", "planner_a", "planner_b", "n", "median_diff", "ci95_low", "ci95_high", "wilcoxon_p"],
-        [[c.metric, c.planner_a, c.planner_b, c.n, c.median_diff, c.ci_low, c.ci_high, c.p_value] for c in pairs],
+        ["metric", "planner_a", "planner_b", "n", "scenes", "median_diff", "ci95_low", "ci95_high", "wilcoxon_p"],
+        [[c.metric, c.planner_a, c.planner_b, c.n, c.scenes, c.median_diff, c.ci_low, c.ci_high, c.p_value]
+         for c in pairs],
     )
-    log.info("wrote %s, %s, %s", md_path, csv_path, paired_path)
-    return [md_path, csv_path, paired_path]
+    log.info("wrote %s, %s, %s, %s", md_path, json_path, csv_path, paired_path)
+    return [md_path, json_path, csv_path, paired_path]

@@ -1,9 +1,12 @@
-"""Summary statistics: per-planner success rates and metric quartiles, and paired planner comparisons.
+"""Summary statistics over distinct problems: success rates with Wilson intervals, metric quartiles
+(on each planner's own successes and on the subset every planner solved), and paired comparisons.
 
-Groups are one planner's trials over all problems, per problem kind or per scene variant (`summarize`);
-paired comparisons take the differences on the problems both planners solved, with a percentile-bootstrap
-CI of their median and a Wilcoxon signed-rank p-value (`paired_comparisons`). Everything is computed
-from the saved trial records alone (see `suite.run.records`).
+The unit of replication is the distinct problem (`suite.report.outcomes`): a problem tried several
+times counts once. Groups are one planner's problems overall, per problem kind or per scene family
+(`summarize`); `common_subset_stats` measures every planner on the problems all of them solved;
+paired comparisons take the differences on the problems both planners solved, with a bootstrap CI of
+their median that resamples scenes and a Wilcoxon signed-rank p-value (`paired_comparisons`).
+Everything is computed from the saved trial records alone (see `suite.run.records`).
 """
 
 from __future__ import annotations
@@ -16,16 +19,16 @@ from typing import Any
 
 import numpy as np
 
-from suite.run.records import (
-    SUCCESS,
-    is_success,
-    metric,
-    metric_values,
-    planners_in,
-    problem_key,
-    problem_kinds_in,
-    statuses_in,
+from suite.report.outcomes import (
+    FEW_PROBLEMS,
+    cluster_bootstrap_median_ci,
+    common_subset,
+    family_of,
+    outcomes,
+    solved_count,
+    wilson_interval,
 )
+from suite.run.records import planners_in, problem_kinds_in, statuses_in
 
 #: The metrics of the summary: record field -> column label (with unit).
 SUMMARY_METRICS: dict[str, str] = {
@@ -60,29 +63,43 @@ class MetricStats:
 
 @dataclasses.dataclass(frozen=True)
 class GroupSummary:
-    """One planner's results over a group of problems (all of them, or one problem kind)."""
+    """One planner's results over a group of distinct problems (all of them, one kind or one family).
+
+    `n` counts distinct problems, `successes` the problems solved (a problem tried several times
+    counts once, as the share of its trials solved), `trials` the trials behind them. Metrics are
+    over the solved problems, one value per problem (the median of its successful trials);
+    `time_to_solve` is over every problem, a failure counted at its budget.
+    """
 
     planner: str
     problem: str  # a problem kind, or "all"
-    variant: str  # a scene variant, or "all"
+    variant: str  # a scene family, or "all"
     n: int
-    successes: int
+    successes: float
+    trials: int
     status_counts: dict[str, int]
     metrics: dict[str, MetricStats]
+    time_to_solve: MetricStats
 
     @property
     def success_rate(self) -> float:
         return self.successes / self.n if self.n else math.nan
 
+    @property
+    def success_ci95(self) -> tuple[float, float]:
+        """The 95% Wilson interval of the success rate over distinct problems."""
+        return wilson_interval(self.successes, self.n)
+
 
 @dataclasses.dataclass(frozen=True)
 class PairedComparison:
-    """Paired differences (planner_a - planner_b) of one metric over the problems both solved.
+    """Paired differences (planner_a - planner_b) of one metric over the distinct problems both solved.
 
     Attributes:
-        n: number of problems both planners solved.
+        n: number of distinct problems both planners solved.
+        scenes: number of scenes those problems come from (the bootstrap's clusters).
         median_diff: median of the paired differences (the metric's unit).
-        ci_low, ci_high: percentile-bootstrap 95% CI of that median (NaN if n < 2).
+        ci_low, ci_high: 95% CI of that median, percentile bootstrap resampling scenes (NaN if n < 2).
         p_value: two-sided Wilcoxon signed-rank p (NaN if n < 2; 1.0 if all differences are 0).
     """
 
@@ -94,6 +111,12 @@ class PairedComparison:
     ci_low: float
     ci_high: float
     p_value: float
+    scenes: int = 0
+
+    @property
+    def few(self) -> bool:
+        """True when the comparison rests on fewer than `FEW_PROBLEMS` distinct problems."""
+        return self.n < FEW_PROBLEMS
 
 
 # --- computation ---------------------------------------------------------------------------------
@@ -103,21 +126,30 @@ def _group(records: Sequence[dict], *, planner: str, problem: str, variant: str)
     counts = {s: 0 for s in statuses_in(records)}
     for r in records:
         counts[str(r["status"])] += 1
+    per_problem = list(outcomes(records, metrics=SUMMARY_METRICS).values())
     return GroupSummary(
         planner=planner,
         problem=problem,
         variant=variant,
-        n=len(records),
-        successes=counts.get(SUCCESS, 0),
+        n=len(per_problem),
+        successes=solved_count(per_problem),
+        trials=len(records),
         status_counts={s: c for s, c in counts.items() if c},
-        metrics={m: MetricStats.of(metric_values(records, m)) for m in SUMMARY_METRICS},
+        metrics={m: MetricStats.of(_finite([o.metrics[m] for o in per_problem])) for m in SUMMARY_METRICS},
+        time_to_solve=MetricStats.of(_finite([o.time_to_solve_s for o in per_problem])),
     )
+
+
+def _finite(values: Sequence[float]) -> np.ndarray:
+    arr = np.asarray(values, dtype=float)
+    return arr[np.isfinite(arr)]
 
 
 def summarize(
     records: Sequence[dict[str, Any]], *, by: str | None = None, planners: Sequence[str] | None = None
 ) -> list[GroupSummary]:
-    """Per-planner summaries, over all records or split by "problem" kind or "variant".
+    """Per-planner summaries over distinct problems, over all records or split by "problem" kind or
+    "variant" (the scene family).
 
     Args:
         records: trial records.
@@ -127,18 +159,37 @@ def summarize(
     if by not in (None, "problem", "variant"):
         raise ValueError(f"by must be None, 'problem' or 'variant', got {by!r}")
     planners = list(planners) if planners is not None else planners_in(records)
+    field = {"problem": lambda r: str(r["problem"]), "variant": family_of}.get(by or "")
     out = []
     for p in planners:
         mine = [r for r in records if r["planner"] == p]
-        if by is None:
+        if field is None:
             out.append(_group(mine, planner=p, problem=ALL, variant=ALL))
             continue
-        values = problem_kinds_in(mine) if by == "problem" else sorted({str(r["variant"]) for r in mine})
+        values = problem_kinds_in(mine) if by == "problem" else sorted({family_of(r) for r in mine})
         for v in values:
-            sub = [r for r in mine if str(r[by]) == v]
+            sub = [r for r in mine if field(r) == v]
             out.append(
                 _group(sub, planner=p, problem=v if by == "problem" else ALL, variant=v if by == "variant" else ALL)
             )
+    return out
+
+
+def common_subset_stats(
+    records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None,
+    metrics: Sequence[str] = tuple(SUMMARY_METRICS),
+) -> dict[str, dict[str, MetricStats]]:
+    """metric -> planner -> stats over the distinct problems EVERY planner solved (no survivorship).
+
+    A planner that solves only the easy problems looks best on its own successes; on the common
+    subset all planners are measured on the same problems.
+    """
+    planners = list(planners) if planners is not None else planners_in(records)
+    per = {p: outcomes([r for r in records if r["planner"] == p], metrics=metrics) for p in planners}
+    out: dict[str, dict[str, MetricStats]] = {}
+    for name in metrics:
+        keys = common_subset(per, name)
+        out[name] = {p: MetricStats.of(_finite([per[p][k].metrics[name] for k in keys])) for p in planners}
     return out
 
 
@@ -172,17 +223,6 @@ def wilcoxon_p(diffs: np.ndarray) -> float:
     return float(wilcoxon(diffs).pvalue)
 
 
-def _per_problem_values(records: Sequence[dict], name: str) -> dict[tuple, float]:
-    """problem key -> the metric over that planner's successful trials of it (median of repeats)."""
-    values: dict[tuple, list[float]] = {}
-    for r in records:
-        if is_success(r):
-            v = metric(r, name)
-            if math.isfinite(v):
-                values.setdefault(problem_key(r), []).append(v)
-    return {k: float(np.median(v)) for k, v in values.items()}
-
-
 def paired_comparisons(
     records: Sequence[dict[str, Any]],
     *,
@@ -191,10 +231,12 @@ def paired_comparisons(
     planners: Sequence[str] | None = None,
     n_resamples: int = N_RESAMPLES,
 ) -> list[PairedComparison]:
-    """Paired comparisons of every planner pair on every metric.
+    """Paired comparisons of every planner pair on every metric, over distinct problems.
 
-    Trials pair on (scene_seed, variant, can_id, problem); only problems both planners solved
-    count. A planner with several successful trials of one problem contributes their median.
+    Trials pair on their problem identity (`problem_key`); only problems both planners solved
+    count, each once (a planner with several successful trials of one problem contributes their
+    median). The CI of the median difference resamples scenes, since problems of one scene are
+    not independent.
 
     Args:
         records: trial records.
@@ -204,14 +246,15 @@ def paired_comparisons(
         n_resamples: bootstrap resamples.
     """
     planners = list(planners) if planners is not None else planners_in(records)
-    by_planner = {p: [r for r in records if r["planner"] == p] for p in planners}
+    per = {p: outcomes([r for r in records if r["planner"] == p], metrics=metrics) for p in planners}
     out = []
     for name in metrics:
-        values = {p: _per_problem_values(by_planner[p], name) for p in planners}
         for a, b in itertools.combinations(planners, 2):
-            common = sorted(set(values[a]) & set(values[b]))
-            diffs = np.array([values[a][k] - values[b][k] for k in common])
-            lo, hi = bootstrap_median_ci(diffs, rng=rng, n_resamples=n_resamples)
+            common = [k for k in per[a] if k in per[b]
+                      and math.isfinite(per[a][k].metrics[name]) and math.isfinite(per[b][k].metrics[name])]
+            diffs = np.array([per[a][k].metrics[name] - per[b][k].metrics[name] for k in common])
+            scenes = [per[a][k].scene for k in common]
+            lo, hi = cluster_bootstrap_median_ci(diffs, scenes, rng=rng, n_resamples=n_resamples)
             out.append(
                 PairedComparison(
                     metric=name,
@@ -222,6 +265,7 @@ def paired_comparisons(
                     ci_low=lo,
                     ci_high=hi,
                     p_value=wilcoxon_p(diffs),
+                    scenes=len(set(scenes)),
                 )
             )
     return out

@@ -8,15 +8,20 @@ from typing import Any
 
 from tabulate import tabulate
 
+from suite.report.outcomes import FEW_PROBLEMS
 from suite.report.summary_stats import (
     N_RESAMPLES,
     SUMMARY_METRICS,
     GroupSummary,
     MetricStats,
     PairedComparison,
+    common_subset_stats,
     summarize,
 )
 from suite.run.records import SUCCESS, planners_in, problem_counts, statuses_in
+
+#: The success-aware time column: every problem counts, a failure at its budget.
+TIME_TO_SOLVE = "time to solve, failures at budget (s)"
 
 
 def format_number(v: float) -> str:
@@ -36,22 +41,41 @@ def _stat(s: MetricStats) -> str:
     return f"{format_number(s.median)} [{format_number(s.q1)}, {format_number(s.q3)}]"
 
 
+def _count(k: float) -> str:
+    return f"{k:g}" if float(k).is_integer() else f"{k:.1f}"
+
+
 def _rate(g: GroupSummary) -> str:
-    pct = f" ({100 * g.success_rate:.0f}%)" if g.n else ""
-    return f"{g.successes}/{g.n}{pct}"
+    """"k/n (rate%, 95% Wilson interval)" over distinct problems."""
+    if not g.n:
+        return "0/0"
+    lo, hi = g.success_ci95
+    return f"{_count(g.successes)}/{g.n} ({100 * g.success_rate:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}])"
 
 
 def _rows(groups: Sequence[GroupSummary], *, key: str | None) -> tuple[list[str], list[list[str]]]:
-    headers = ["planner"] + ([key] if key else []) + ["success"] + list(SUMMARY_METRICS.values())
+    headers = (["planner"] + ([{"variant": "family"}.get(key, key)] if key else []) + ["success (95% CI)", TIME_TO_SOLVE]
+               + list(SUMMARY_METRICS.values()))
     rows = []
     for g in groups:
-        row = [g.planner] + ([getattr(g, key)] if key else []) + [_rate(g)]
+        row = [g.planner] + ([getattr(g, key)] if key else []) + [_rate(g), _stat(g.time_to_solve)]
         rows.append(row + [_stat(g.metrics[m]) for m in SUMMARY_METRICS])
     return headers, rows
 
 
+def _common_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[str]]]:
+    stats = common_subset_stats(records, planners=planners)
+    headers = ["metric (common subset)", "n"] + list(planners)
+    rows = []
+    for m, label in SUMMARY_METRICS.items():
+        n = next(iter(stats[m].values())).n if stats[m] else 0
+        rows.append([label, n] + [format_number(stats[m][p].median) if n else "n/a" for p in planners])
+    return headers, rows
+
+
 def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None) -> str:
-    """The per-planner table for the terminal: success k/n and median [IQR] of each metric."""
+    """The per-planner table for the terminal: success k/n with its interval and median [IQR] of each
+    metric, over distinct problems, then the composition line (and its warning when too few)."""
     if not records:
         return "no trial records"
     headers, rows = _rows(summarize(records, planners=planners), key=None)
@@ -59,11 +83,16 @@ def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] 
 
 
 def composition(records: Sequence[dict[str, Any]]) -> str:
-    """One line: on how many distinct problems (how many trivial) and scenes the figures rest."""
+    """One line: on how many distinct problems (how many trivial) and scenes the figures rest, and a
+    warning when they are fewer than `FEW_PROBLEMS`."""
     c = problem_counts(records)
     trivial = (f", {c['trivial']} of them trivial (the straight joint segment is already valid)"
                if c["known_trivial"] else "")
-    return f"{c['distinct']} distinct problems from {c['scenes']} scenes{trivial}."
+    line = f"{c['distinct']} distinct problems from {c['scenes']} scenes{trivial}."
+    if c["distinct"] < FEW_PROBLEMS:
+        line += (f" WARNING: fewer than {FEW_PROBLEMS} distinct problems: too few to tell planners apart; "
+                 "read every figure as anecdotal.")
+    return line
 
 
 def _failure_rows(groups: Sequence[GroupSummary], statuses: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
@@ -76,12 +105,14 @@ def _failure_rows(groups: Sequence[GroupSummary], statuses: Sequence[str]) -> tu
 
 
 def _paired_rows(pairs: Sequence[PairedComparison]) -> tuple[list[str], list[list[Any]]]:
-    headers = ["metric", "A - B", "n", "median diff", "95% CI", "Wilcoxon p"]
+    headers = ["metric", "A - B", "problems", "scenes", "median diff", "95% CI", "Wilcoxon p", "note"]
     rows = []
     for c in pairs:
         ci = "n/a" if not math.isfinite(c.ci_low) else f"[{format_number(c.ci_low)}, {format_number(c.ci_high)}]"
         p = "n/a" if not math.isfinite(c.p_value) else f"{c.p_value:.3g}"
-        rows.append([SUMMARY_METRICS.get(c.metric, c.metric), f"{c.planner_a} - {c.planner_b}", c.n, format_number(c.median_diff), ci, p])
+        note = f"n < {FEW_PROBLEMS}: too few" if c.few else ""
+        rows.append([SUMMARY_METRICS.get(c.metric, c.metric), f"{c.planner_a} - {c.planner_b}", c.n, c.scenes,
+                     format_number(c.median_diff), ci, p, note])
     return headers, rows
 
 
@@ -97,20 +128,30 @@ def summary_markdown(
     md = [
         f"# {title}",
         "",
-        f"{len(records)} trials: {len(planners)} planners ({', '.join(planners)}). {composition(records)} "
-        "Metrics are over successful trials only: median [first quartile, third quartile].",
+        f"{len(records)} trials: {len(planners)} planners ({', '.join(planners)}). {composition(records)}",
+        "",
+        "The unit is the distinct problem: a problem tried several times counts once (success as the share "
+        "of its trials solved, each metric as the median of its successful trials). Success: solved/distinct "
+        "problems, rate and its 95% Wilson interval. Time to solve: median [quartiles] over every problem, a "
+        "failure counted at its time budget. Other metrics: median [first quartile, third quartile] over each "
+        "planner's own solved problems; the common-subset table below measures all planners on the same problems.",
         "",
         "## Per planner",
         "",
     ]
     md.append(tabulate(*reversed(_rows(summarize(records, planners=planners), key=None)), tablefmt="github"))
-    md += ["", "## Failures by status", ""]
+    if len(planners) > 1:
+        md += ["", "## On the problems every planner solved", "",
+               "Medians over the distinct problems that every planner solved (n of them per metric): "
+               "no planner is flattered by skipping the hard ones.", ""]
+        md.append(tabulate(*reversed(_common_rows(records, planners)), tablefmt="github"))
+    md += ["", "## Failures by status (trials)", ""]
     groups = summarize(records, planners=planners)
     md.append(tabulate(*reversed(_failure_rows(groups, statuses_in(records))), tablefmt="github"))
     md += ["", "## Per planner and problem kind", ""]
     md.append(tabulate(*reversed(_rows(summarize(records, by="problem", planners=planners), key="problem")), tablefmt="github"))
     if len({r["variant"] for r in records}) > 1:
-        md += ["", "## Per planner and scene variant", ""]
+        md += ["", "## Per planner and scene family", ""]
         md.append(
             tabulate(*reversed(_rows(summarize(records, by="variant", planners=planners), key="variant")), tablefmt="github")
         )
@@ -118,9 +159,10 @@ def summary_markdown(
         "",
         "## Paired comparisons",
         "",
-        "Differences A - B on the problems both planners solved (paired by problem identity): median, "
-        f"percentile-bootstrap 95% CI of the median ({N_RESAMPLES} "
-        "resamples), two-sided Wilcoxon signed-rank p-value. Negative means A is lower.",
+        "Differences A - B on the distinct problems both planners solved (paired by problem identity): median, "
+        f"percentile-bootstrap 95% CI of the median resampling whole scenes ({N_RESAMPLES} resamples; problems of "
+        "one scene are not independent; n/a with one scene), two-sided Wilcoxon signed-rank p-value (it treats "
+        "problems as independent, so read it beside the CI). Negative means A is lower.",
         "",
     ]
     md.append(tabulate(*reversed(_paired_rows(pairs)), tablefmt="github") if pairs else "(fewer than two planners)")

@@ -23,8 +23,10 @@ log = logging.getLogger(__name__)
 TRIALS_FILE = "trials.jsonl"
 MANIFEST_FILE = "manifest.json"
 
-#: Every status a record may carry, in the order tables and plots list them.
-STATUSES: tuple[str, ...] = tuple(s.value for s in PlanStatus)
+#: Every status a record may carry, in the order tables and plots list them. `no_result`: an
+#: imported external planner sent nothing for the problem (`suite.exchange.results`).
+NO_RESULT = "no_result"
+STATUSES: tuple[str, ...] = (*(s.value for s in PlanStatus), NO_RESULT)
 SUCCESS = PlanStatus.SUCCESS.value
 
 #: The motions of the pick-and-place cycle in the order they happen.
@@ -125,8 +127,11 @@ def problem_counts(records: Sequence[dict[str, Any]]) -> dict[str, int]:
 def metric(rec: dict[str, Any], name: str) -> float:
     """A metric of a trial as a float; NaN when the record does not have it (e.g. failures).
 
-    `planning_time_s` is read from the record itself, every other name from its "metrics".
+    `planning_time_s` is read from the record itself, `time_to_trajectory_s` is planning time plus
+    TOPP-RA's timing time, every other name is read from its "metrics".
     """
+    if name == "time_to_trajectory_s":
+        return metric(rec, "planning_time_s") + metric(rec, "timing_time_s")
     if name in TOP_LEVEL_METRICS:
         value = rec.get(name)
     else:

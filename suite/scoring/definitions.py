@@ -57,6 +57,13 @@ METRICS: tuple[MetricDef, ...] = (
               "duration of the TOPP-RA time-optimal trajectory within the iiwa's velocity and acceleration limits",
               "time", note="cuRobo's 'motion time'", headline=True),
     MetricDef("timing_time_s", "s", "lower", "wall time of the TOPP-RA time parameterization and its checks", "time"),
+    MetricDef("time_to_trajectory_s", "s", "lower",
+              "planning_time_s + timing_time_s: the wall time from the problem to an executable, timed trajectory",
+              "time", note="the time to an executable trajectory that users comparing cuRobo with OMPL asked for"),
+    MetricDef("time_to_solve_s", "s", "lower",
+              "success-aware time, per distinct problem: median over its trials of planning_time_s, a failed "
+              "trial counted at its time budget (summary only, over every problem, not just the solved ones)",
+              "time", note="a failure costs the whole budget (as PAR-1 in solver competitions)"),
     MetricDef("path_length_rad", "rad", "lower",
               "joint-space length: sum of L2 distances between consecutive waypoints", "length",
               note="as OMPL's PathGeometric::length() (MoveIt uses L1)", headline=True),
@@ -131,6 +138,10 @@ METRICS: tuple[MetricDef, ...] = (
 )
 
 METRICS_BY_NAME: dict[str, MetricDef] = {m.name: m for m in METRICS}
+
+#: Metrics that `suite.scoring.metrics.score` does not compute from the path: the orchestrator's
+#: clock, and the times derived from it when records are read or summarized.
+NOT_FROM_PATH: frozenset[str] = frozenset({"planning_time_s", "time_to_trajectory_s", "time_to_solve_s"})
 
 
 def metric_def(name: str) -> MetricDef:

@@ -1,6 +1,6 @@
 """Path and trajectory metrics, computed identically for every planner's validated path.
 
-`score` computes every metric of `suite.scoring.definitions.METRICS` (except planning time) for
+`score` computes every metric of `suite.scoring.definitions.METRICS` (except the times of `NOT_FROM_PATH`) for
 one path. None depends on how many waypoints describe the path: geometric metrics work on the
 simplified polyline (`polyline.simplify`) and on samples at a fixed arc-length spacing with its
 corners (`polyline.arc_samples`); means along the path are weighted by arc length; the timed
@@ -139,7 +139,7 @@ def score(
         reference_ee_length_m: the reference path's gripper path length (for `ee_length_ratio`).
 
     Returns:
-        Every metric of `suite.scoring.definitions.METRICS` but planning_time_s, by name.
+        Every metric of `suite.scoring.definitions.METRICS` but those of `NOT_FROM_PATH`, by name.
     """
     path = as_path(path)
     robot = world.robot

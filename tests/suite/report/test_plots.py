@@ -29,8 +29,8 @@ def test_make_plots_writes_every_figure(run_dir):
     written = make_plots(run_dir)
     names = sorted(p.name for p in written)
     assert names == sorted([
-        "metrics_boxplots.png", "outcomes.png", "planning_time_cdf.png",
-        "gripper_paths_seed3_open.png", "gripper_paths_seed3_wall.png", "joint_profiles_transit.png",
+        "metrics_boxplots.png", "outcomes.png", "planning_time_cdf.png", "success_by_family.png",
+        "length_ratio_by_family.png", "natural_poses.png", "gripper_paths_seed3_open.png", "gripper_paths_seed3_wall.png", "joint_profiles_transit.png",
     ])
     for p in written:
         assert p.parent == run_dir / "plots"
@@ -46,7 +46,8 @@ def test_make_plots_without_any_success(tmp_path):
     written = make_plots(write_run(tmp_path, records, planners=("ik", "rrt"), cans=1))
     # no path to draw a profile of; the statistics figures and the scene are still drawn
     assert sorted(p.name for p in written) == sorted(
-        ["metrics_boxplots.png", "outcomes.png", "planning_time_cdf.png", "gripper_paths_seed0_open.png"])
+        ["metrics_boxplots.png", "outcomes.png", "planning_time_cdf.png", "success_by_family.png",
+         "length_ratio_by_family.png", "natural_poses.png", "gripper_paths_seed0_open.png"])
 
 
 def test_planner_colors_are_fixed_per_planner():

@@ -30,7 +30,7 @@ def record(planner, *, seed=0, can=0, kind="transit", status="success", time_s=0
         "trial_id": f"{planner}-{seed}-{can}-{kind}-{variant}", "planner": planner, "planner_config": {},
         "scene_seed": seed, "variant": variant, "can_id": can, "problem": kind, "status": status,
         "planning_time_s": time_s, "q_start": Q0.tolist(), "q_goal": None, "path": None, "metrics": {},
-        "stats": {}, "seed": 1, "held": False, "scene_key": "k", "time_limit_s": 5.0,
+        "stats": {}, "seed": 1, "held": False, "scene_key": f"k{seed}", "time_limit_s": 5.0,
     }
     if status == "success":
         path = straight(length_rad)
@@ -130,22 +130,22 @@ def test_summary_by_problem_kind():
 def test_summary_table_shows_k_of_n_and_median_with_iqr():
     text = summary_table(five_rrt_trials() + [record("ik", status="ik_failed")])
     line = next(ln for ln in text.splitlines() if ln.startswith("rrt"))
-    assert "4/5 (80%)" in line and "2.5 [1.75, 3.25]" in line
+    assert "4/5 (80% [38, 96])" in line and "2.5 [1.75, 3.25]" in line
     ik_line = next(ln for ln in text.splitlines() if ln.startswith("ik"))
-    assert "0/1 (0%)" in ik_line and "n/a" in ik_line
+    assert "0/1 (0% [0, 79])" in ik_line and "n/a" in ik_line
 
 
 # --- paired statistics -----------------------------------------------------------------------------
 
 
 def paired_example():
-    """rrt and ik on 7 problems: rrt solves 7, ik 6; rrt is longer by 0.1 .. 0.6 rad on the shared 6."""
+    """rrt and ik on 7 problems of 7 scenes: rrt solves 7, ik 6; rrt is longer by 0.1 .. 0.6 rad on the shared 6."""
     recs = []
     for i in range(6):
-        recs.append(record("ik", can=i, length_rad=1.0 + i, time_s=0.05))
-        recs.append(record("rrt", can=i, length_rad=1.0 + i + 0.1 * (i + 1), time_s=0.5))
-    recs.append(record("rrt", can=6, length_rad=9.0))
-    recs.append(record("ik", can=6, status="ik_failed"))
+        recs.append(record("ik", seed=i, length_rad=1.0 + i, time_s=0.05))
+        recs.append(record("rrt", seed=i, length_rad=1.0 + i + 0.1 * (i + 1), time_s=0.5))
+    recs.append(record("rrt", seed=6, length_rad=9.0))
+    recs.append(record("ik", seed=6, status="ik_failed"))
     return recs
 
 
@@ -179,9 +179,9 @@ def test_paired_small_and_degenerate_cases():
 def test_write_summary_files(tmp_path):
     recs = paired_example()
     written = write_summary(tmp_path, recs, seed=3)
-    assert [p.name for p in written] == ["summary.md", "summary.csv", "paired.csv"]
+    assert [p.name for p in written] == ["summary.md", "summary.json", "summary.csv", "paired.csv"]
     md = (tmp_path / "summary.md").read_text()
-    assert "6/7 (86%)" in md and "7/7 (100%)" in md
+    assert "6/7 (86% [49, 97])" in md and "7/7 (100% [65, 100])" in md
     assert "## Paired comparisons" in md and "ik - rrt" in md
     assert "ik_failed" in md  # the failure breakdown
     rows = list(csv.DictReader((tmp_path / "summary.csv").open()))
