@@ -200,15 +200,16 @@ def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, prog
     from suite.execution.jobs import jobs_from_records, run_jobs, write_execution
     from suite.run.records import read_trials
 
-    steps, shared = None, None
+    steps, shared, orders = None, None, None
     if config.dataset:
         from suite.problems.dataset import load_dataset
 
-        steps = load_dataset(config.dataset).cycle_steps
+        dataset = load_dataset(config.dataset)
+        steps, orders = dataset.cycle_steps, dataset.picking_orders
         shared = _shared_steps(trials, steps)
     jobs = jobs_from_records(trials, read_trials(out / TRIALS_FILE), grasps=config.grasps,
                              time_limit_s=config.time_limit_s, seed=config.seed, reperceive=reperceive,
-                             replay_dir=out, cycle_steps=steps, shared_steps=shared)
+                             replay_dir=out, cycle_steps=steps, shared_steps=shared, picking_orders=orders)
     print(f"executing {len(jobs)} plan(s) in physics ({'closed loop' if reperceive else 'open loop'})...",
           file=sys.stderr)
     write_execution(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar))

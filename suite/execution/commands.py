@@ -64,7 +64,8 @@ class Segment:
 
 @dataclasses.dataclass(frozen=True)
 class CanCycle:
-    """One can's five timed motions, in the order of `planners.base.PROBLEM_KINDS`."""
+    """One can's five timed motions, in the order of `planners.base.PROBLEM_KINDS` (four for a last
+    can whose return was not planned)."""
 
     can_id: int
     trajectories: tuple[TimedTrajectory, ...]
@@ -90,7 +91,8 @@ class CommandStream:
         self.duration_s += duration
 
     def append_cycle(self, cycle: CanCycle) -> None:
-        approach, descend, lift, transit, ret = cycle.trajectories
+        """Append a can's motions; a cycle of four (no return) ends with the gripper open over the bin."""
+        approach, descend, lift, transit, *rest = cycle.trajectories
         w, closed = self._open, 0.0  # closed: the force limit, not the position, holds the can
         self._add("approach", cycle.can_id, approach.duration_s, approach, w, w, False)
         self._add("descend", cycle.can_id, descend.duration_s, descend, w, w, False)
@@ -98,7 +100,8 @@ class CommandStream:
         self._add("lift", cycle.can_id, lift.duration_s, lift, closed, closed, True)
         self._add("transit", cycle.can_id, transit.duration_s, transit, closed, closed, True)
         self._add("open", cycle.can_id, self._config.open_s, None, closed, w, False)
-        self._add("return", cycle.can_id, ret.duration_s, ret, w, w, False)
+        if rest:
+            self._add("return", cycle.can_id, rest[0].duration_s, rest[0], w, w, False)
 
     @property
     def q_end(self) -> np.ndarray:

@@ -24,6 +24,7 @@ from suite.execution.commands import WorldState, planned_ahead, timed_cycle
 from suite.execution.monitor import where
 from suite.execution.plant import ExecutionConfig
 from suite.execution.simulate import execute_cycles
+from suite.run.records import FINAL_RETURN_NOT_EXECUTED
 
 log = logging.getLogger(__name__)
 
@@ -82,8 +83,13 @@ def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob) -> list[tu
 def _open_loop(cans: Sequence[tuple[int, tuple, str]]):
     """Cycles in order up to the first can not fully planned (later plans assumed it gone)."""
     cycles, stopped = [], ""
-    for can_id, paths, failed in cans:
-        if failed or any(p is None for p in paths):
+    for i, (can_id, paths, failed) in enumerate(cans):
+        if i == len(cans) - 1 and paths[-1] is None and all(p is not None for p in paths[:-1]):
+            # the last can's return (after the drop) is missing: its can still goes in the bin; the
+            # arm stays over the bin, and the record says the return was not executed
+            paths = paths[:-1]
+            stopped = f"can {can_id}: {FINAL_RETURN_NOT_EXECUTED} ({failed or 'not planned'})"
+        elif failed or any(p is None for p in paths):
             stopped = f"can {can_id}: {failed or 'not planned'}"
             break
         cycle = timed_cycle(can_id, paths)
@@ -186,7 +192,8 @@ def _meshcat(scene: Scene):
 
 def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str, time_limit_s: float,
                       seed: int, reperceive: bool, replay_dir: Path | None,
-                      cycle_steps: dict | None = None, shared_steps: dict | None = None) -> list[ExecutionJob]:
+                      cycle_steps: dict | None = None, shared_steps: dict | None = None,
+                      picking_orders: dict | None = None) -> list[ExecutionJob]:
     """One job per planner and scene of a comparison run, its plans taken from the trial records.
 
     Args:
@@ -197,6 +204,9 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
             id, kind) -> (q_start, q_goal): executed along their (validated) straight segment.
         shared_steps: cycle steps identical to a problem the run planned for another scene,
             (scene key, can id, kind) -> problem_id: executed along the planner's path of it.
+        picking_orders: a dataset's cans per scene key in picking order; every can of it is picked,
+            also one whose steps are all stored outside the benchmark (default: the cans planned,
+            in id order).
     """
     from planners.base import PROBLEM_KINDS
 
@@ -222,10 +232,10 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
                                                                      t.problem.q_start, status)
         cans: dict[int, list] = {}
         q_home = None
-        for can_id in sorted(by_can):
+        for can_id in (picking_orders or {}).get(key) or sorted(by_can):
             paths, failed = [], ""
             for kind in PROBLEM_KINDS:
-                if kind in by_can[can_id]:
+                if kind in by_can.get(can_id, {}):
                     path, q_start, status = by_can[can_id][kind]
                 elif (key, can_id, kind) in steps:  # a trivial step stored outside the benchmark
                     q_start, q_goal = steps[(key, can_id, kind)]

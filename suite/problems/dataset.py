@@ -136,6 +136,8 @@ class Dataset:
         references: per problem_id, the reference path (N, 7).
         cycle_steps: the stored trivial cycle steps that are not benchmark problems, as
             (scene_key, can_id, kind) -> (q_start, q_goal): their straight segment is valid.
+        picking_orders: per scene_key, the cans of its cycle in picking order (every stored step
+            counts, benchmark or not): a can whose every step is trivial is still picked.
     """
 
     name: str
@@ -147,6 +149,7 @@ class Dataset:
     meta: dict[str, dict[str, Any]]
     references: dict[str, np.ndarray]
     cycle_steps: dict[tuple[str, int, str], tuple[list, list]] = dataclasses.field(default_factory=dict)
+    picking_orders: dict[str, tuple[int, ...]] = dataclasses.field(default_factory=dict)
 
 
 META_FIELDS = ("family", "kind", "trivial", "difficulty", "straight_length_rad", "split", "reference_length_rad")
@@ -196,8 +199,12 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
     scenes = {rec["scene_key"]: rec for _, _, rec in _read_jsonl(directory / SCENES_FILE)}
     built: dict[str, Scene] = {}
     ids, problems, meta, refs, steps = [], [], {}, {}, {}
+    removed_before: dict[str, dict[int, int]] = {}  # scene -> can -> how many cans were picked before it
     for lineno, _, rec in _read_jsonl(directory / PROBLEMS_FILE):
         pid = rec.get("problem_id")
+        before = removed_before.setdefault(rec["scene_key"], {})
+        n_removed = len(rec.get("removed_can_ids") or ())  # the return after a drop counts its own can
+        before[int(rec["can_id"])] = min(before.get(int(rec["can_id"]), n_removed), n_removed)
         if not rec.get("benchmark", True):
             steps[(rec["scene_key"], int(rec["can_id"]), rec["kind"])] = (rec["q_start"], rec["q_goal"])
             continue
@@ -212,7 +219,8 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
         problems.append(problem_from_record(rec, built[key], time_limit_s=time_limit_s))
         meta[pid] = {"problem_id": pid, **{k: rec.get(k) for k in META_FIELDS}}
         refs[pid] = np.asarray(rec["reference"]["path"], float)
-    return Dataset(name, manifest["hash"], tier, manifest, tuple(ids), tuple(problems), meta, refs, steps)
+    orders = {key: tuple(sorted(cans, key=lambda c: (cans[c], c))) for key, cans in removed_before.items()}
+    return Dataset(name, manifest["hash"], tier, manifest, tuple(ids), tuple(problems), meta, refs, steps, orders)
 
 
 def dataset_scene(name: str, scene_key: str) -> Scene:

@@ -9,7 +9,7 @@ import numpy as np
 from tabulate import tabulate
 
 from suite.report.summary_tables import format_number
-from suite.run.records import BACK_ON_PLATE, ELSEWHERE, NOT_ATTEMPTED, fate_counts
+from suite.run.records import BACK_ON_PLATE, ELSEWHERE, FINAL_RETURN_NOT_EXECUTED, NOT_ATTEMPTED, fate_counts
 
 EXECUTION_INTRO = """## Execution in physics
 
@@ -42,7 +42,8 @@ def execution_table(executions: Sequence[dict[str, Any]], *, planners: Sequence[
             continue
         total = sum(e["cans_total"] for e in runs)
         in_bin = sum(e["cans_in_bin"] for e in ok)
-        full = [e for e in ok if not e["stopped"] and e["cans_attempted"] == e["cans_total"]]
+        full = [e for e in ok if (not e["stopped"] or FINAL_RETURN_NOT_EXECUTED in e["stopped"])
+                and e["cans_attempted"] == e["cans_total"]]
         full_total = sum(e["cans_total"] for e in full)
         full_bin = sum(e["cans_in_bin"] for e in full)
         clear = [e["clear_time_s"] for e in ok if e["clear_time_s"] is not None]

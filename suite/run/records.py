@@ -197,6 +197,9 @@ def statuses_in(records: Iterable[dict[str, Any]]) -> list[str]:
 #: Where a can ended after physics execution: every can of execution.json has exactly one fate.
 BIN, BACK_ON_PLATE, ELSEWHERE, NOT_ATTEMPTED = "in the bin", "picked, back on the plate", "elsewhere", "not attempted"
 CAN_FATES = (BIN, BACK_ON_PLATE, ELSEWHERE, NOT_ATTEMPTED)
+#: An execution's `stopped` note when only the last can's return (after its drop) had no plan: every
+#: can was still attempted, so the scene counts as fully planned.
+FINAL_RETURN_NOT_EXECUTED = "final return not executed"
 
 
 def can_fate(can: dict[str, Any]) -> str:

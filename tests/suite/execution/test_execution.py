@@ -164,3 +164,27 @@ def test_execute_command_rejects_bad_input_in_one_line(tmp_path):
     r = _cli("execute", "--planner", "rrt", "--cans", "1", "--out", str(blocker / "sub"))
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
     assert blocker.read_text() == "keep me"
+
+
+def test_dataset_execution_picks_cans_whose_steps_are_all_outside_the_benchmark():
+    # open seed 1 of recycle-v1:quick: only the lifts of cans 0-2 are benchmark problems; every step of
+    # cans 3 and 4 is a trivial step stored outside the benchmark. They must be picked all the same.
+    from suite.execution.jobs import jobs_from_records
+    from suite.problems.dataset import load_dataset
+    from suite.run.trial import TrialSpec
+
+    ds = load_dataset("recycle-v1:quick")
+    mine = [p for p in ds.problems if (p.scene.variant, p.scene.seed) == ("open", 1)]
+    key = mine[0].scene.key()
+    assert {p.can_id for p in mine} < set(ds.picking_orders[key])  # some cans have no benchmark problem
+    trials = [TrialSpec(f"t{i}", "rrt", {}, p) for i, p in enumerate(mine)]
+    records = [{"trial_id": t.trial_id, "planner": "rrt", "status": "success", "problem_id": None,
+                "path": [list(t.problem.q_start), list(t.problem.q_goal)], "q_start": list(t.problem.q_start)}
+               for t in trials]
+    (job,) = jobs_from_records(trials, records, grasps="truth", time_limit_s=5.0, seed=0, reperceive=False,
+                               replay_dir=None, cycle_steps=ds.cycle_steps, picking_orders=ds.picking_orders)
+    assert [c for c, _, _ in job.cans] == list(ds.picking_orders[key]) == [0, 1, 2, 3, 4]
+    paths = {c: p for c, p, _ in job.cans}
+    assert all(path is not None for path in paths[3])  # can 3: five stored trivial steps, all executable
+    (failed_4,) = [f for c, _, f in job.cans if c == 4]
+    assert failed_4 == "return not in the dataset"  # its last return is stored once, under another scene
