@@ -243,17 +243,23 @@ def _layout(rng, spec) -> list[CanPose]:
 
 def unreachable_cans(scene: Scene, *, ids=None) -> list[int]:
     """Ids of cans (of `ids`, all by default) with no collision-free IK solution for their grasp
-    or pre-grasp while every can of the scene is on the plate."""
+    or pre-grasp while every can of the scene is on the plate, or whose gripper would touch
+    another can or obstacle on the way down from the pre-grasp to the grasp."""
     from scenes.drake_scene import build_drake_scene
     from scenes.grasp_rule import truth_grasp
     from scenes.ik import Q_READY, PoseIk
 
-    ds = build_drake_scene(scene, mode="plan", cameras=False)
-    ik = PoseIk(ds)
+    ik = None
     bad = []
     for can in scene.cans:
         if ids is not None and can.id not in ids:
             continue
+        if not _gripper_clear(can, [c for c in scene.cans if c.id != can.id], scene.spec):
+            # the open gripper cannot even reach the grasp from the pre-grasp without touching a
+            # neighbour or an obstacle: no IK needed (and a failing IK costs all of its restarts)
+            bad.append(can.id)
+            continue
+        ik = ik or PoseIk(build_drake_scene(scene, mode="plan", cameras=False))
         grasp = truth_grasp(scene, can)
         rng = np.random.default_rng([scene.seed, can.id])
         q_pre = ik.solve(grasp.X_WGpre, q_seed=Q_READY, rng=rng)
