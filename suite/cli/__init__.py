@@ -21,6 +21,7 @@ COMMANDS = {
     "compare": ("suite.cli.compare", "run the planner comparison and write results, table and plots"),
     "execute": ("suite.cli.execute", "plan one scene and execute the plans in physics: are the cans recycled?"),
     "dataset": ("suite.cli.dataset", "build, verify or show a frozen dataset of problems with reference solutions"),
+    "tune": ("suite.cli.tune", "choose a planner's settings on a dataset's tuning split (planners/configs/NAME.yaml)"),
     "plot": ("suite.cli.plot", "redraw the plots and tables of a run from its trials.jsonl"),
     "rescore": ("suite.cli.rescore", "recompute every metric of a run from its stored paths, then redraw its report"),
     "bench": ("suite.cli.bench", "print speed figures (collision, perception, planners)"),

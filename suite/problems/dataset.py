@@ -184,7 +184,7 @@ def read_manifest(directory: Path) -> dict[str, Any]:
 
 
 def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
-    """Load `NAME[:TIER]` (no IK, no scene generation).
+    """Load `NAME[:TIER]` (no IK, no scene generation); TIER may also name a split (`tune`, `test`).
 
     Raises:
         SuiteError: an unknown dataset or tier, or a file that does not parse.
@@ -193,9 +193,12 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
     directory = dataset_dir(name)
     manifest = read_manifest(directory)
     tiers = manifest.get("tiers", {})
-    if tier != ALL and tier not in tiers:
-        raise SuiteError(f"dataset {name!r} has no tier {tier!r}; allowed: {[ALL, *sorted(tiers)]}")
-    wanted = None if tier == ALL else set(tiers[tier])
+    splits = manifest.get("splits", {})
+    if tier != ALL and tier not in tiers and tier not in splits:
+        raise SuiteError(f"dataset {name!r} has no tier or split {tier!r}; allowed: "
+                         f"{[ALL, *sorted(tiers), *sorted(s for s in splits if s not in tiers)]}")
+    wanted = None if tier == ALL or tier not in tiers else set(tiers[tier])
+    split = tier if tier not in tiers and tier in splits else None  # a split is a tier too
     scenes = {rec["scene_key"]: rec for _, _, rec in _read_jsonl(directory / SCENES_FILE)}
     built: dict[str, Scene] = {}
     ids, problems, meta, refs, steps = [], [], {}, {}, {}
@@ -208,7 +211,7 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
         if not rec.get("benchmark", True):
             steps[(rec["scene_key"], int(rec["can_id"]), rec["kind"])] = (rec["q_start"], rec["q_goal"])
             continue
-        if wanted is not None and pid not in wanted:
+        if (wanted is not None and pid not in wanted) or (split is not None and rec.get("split") != split):
             continue
         key = rec.get("scene_key")
         if key not in scenes:

@@ -60,12 +60,16 @@ def trial_id(*, problem: PlanningProblem, planner: str, planner_config: dict) ->
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
 
-def make_config(planner_cls, overrides: dict[str, Any] | None):
-    """The planner's Config dataclass with overrides; unknown fields are a SuiteError."""
+def make_config(planner_cls, overrides: dict[str, Any] | None, *, tuned: bool = True):
+    """The planner's Config dataclass: its class defaults, overlaid with the settings `tune` chose
+    (planners/configs/NAME.yaml, unless `tuned` is False), overlaid with `overrides`; unknown
+    fields are a SuiteError."""
+    from planners.tuned import tuned_settings
     from scenes.errors import SuiteError
 
     cfg_cls = planner_cls.Config
-    overrides = dict(overrides or {})
+    name = getattr(planner_cls, "name", None)
+    overrides = {**(tuned_settings(name) if tuned and name else {}), **(overrides or {})}
     fields = {f.name for f in dataclasses.fields(cfg_cls)}
     unknown = set(overrides) - fields
     if unknown:

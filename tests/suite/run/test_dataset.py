@@ -97,7 +97,7 @@ def test_verify_rejects_a_colliding_reference(small, tmp_path):
 
 def test_unknown_dataset_and_tier_are_one_line(small):
     d, _ = small
-    with pytest.raises(SuiteError, match=r"has no tier 'nope'; allowed: \['all', 'quick'\]"):
+    with pytest.raises(SuiteError, match=r"has no tier or split 'nope'; allowed: \['all', 'quick', 'test', 'tune'\]"):
         load_dataset(f"{d}:nope")
     with pytest.raises(SuiteError, match=r"no dataset at .*known datasets"):
         load_dataset("no-such-dataset")

@@ -1,0 +1,152 @@
+"""`python -m suite tune --planner NAME`: choose a planner's settings on a dataset's tuning split.
+
+Every candidate of the planner's documented search (`planners.tuned.SEARCH_SPACES`, class defaults
+first) runs on the same non-trivial problems of the dataset's `tune` split (up to
+`--per-family` per family, the lowest problem ids: a fixed, content-defined sample), through the
+ordinary trial machinery (validation, TOPP-RA, metrics). The rule of `suite.report.tuning` picks
+one, and `--write` stores it with the whole table in planners/configs/NAME.yaml, which every later
+run uses as the planner's defaults. Runs are kept under `--out` (one directory per candidate), so
+an interrupted tuning resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import hashlib
+import itertools
+import json
+import sys
+from pathlib import Path
+
+from scenes.errors import SuiteError
+from suite.cli.args import positive_float, positive_int
+
+DEFAULT_DATASET = "recycle-v1"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--planner", required=True, help="the planner to tune (see planners/tuned.py for its search)")
+    p.add_argument("--dataset", default=DEFAULT_DATASET, help=f"dataset whose tune split is used (default {DEFAULT_DATASET})")
+    p.add_argument("--per-family", type=positive_int, default=6,
+                   help="non-trivial tuning problems per family (default 6)")
+    p.add_argument("--time-limit-s", type=positive_float, default=5.0, help="budget per problem, s (default 5)")
+    p.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
+    p.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
+    p.add_argument("--out", default=None, help="where the candidates' runs go (default results/tune/PLANNER)")
+    p.add_argument("--write", action="store_true", help="write planners/configs/PLANNER.yaml with the choice")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def grid(planner: str) -> list[dict]:
+    """Every candidate of the planner's search, class defaults first."""
+    from planners.tuned import SEARCH_SPACES
+
+    space = SEARCH_SPACES.get(planner)
+    if not space:
+        raise SuiteError(f"planner {planner!r} has no tuning search; planners with one: {', '.join(sorted(SEARCH_SPACES))}")
+    names = list(space)
+    return [dict(zip(names, values)) for values in itertools.product(*(space[n] for n in names))]
+
+
+def tuning_problems(dataset: str, *, per_family: int, time_limit_s: float):
+    """The sample: up to per_family non-trivial problems of each family of the tune split,
+    lowest problem id first. Returns (dataset, [(problem, meta)])."""
+    from suite.problems.dataset import load_dataset, parse_dataset_arg
+
+    name, tier = parse_dataset_arg(dataset)
+    if tier != "all":
+        raise SuiteError(f"--dataset takes a dataset name (its tune split is used), got {dataset!r}")
+    ds = load_dataset(f"{name}:tune", time_limit_s=time_limit_s)
+    by_family: dict[str, list] = {}
+    for pid, problem in sorted(zip(ds.ids, ds.problems), key=lambda x: x[0]):
+        meta = ds.meta[pid]
+        if not meta.get("trivial"):
+            by_family.setdefault(str(meta["family"]), []).append((problem, meta))
+    chosen = [x for fam in sorted(by_family) for x in by_family[fam][:per_family]]
+    if not chosen:
+        raise SuiteError(f"dataset {name!r} has no non-trivial problem in its tune split")
+    return ds, chosen
+
+
+def _candidate_dir(out: Path, settings: dict) -> Path:
+    digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()[:10]
+    return out / f"candidate-{digest}"
+
+
+def run(args: argparse.Namespace) -> int:
+    from planners.registry import planner_class
+    from planners.tuned import OBJECTIVE, config_path
+    from suite.report.tuning import choose, evaluate, table_rows, weak_families
+    from suite.run.records import read_trials
+    from suite.run.runner import run_trials
+    from suite.run.trial import config_dict, make_config, make_trial
+
+    cls = planner_class(args.planner)
+    candidates = grid(args.planner)
+    ds, problems = tuning_problems(args.dataset, per_family=args.per_family, time_limit_s=args.time_limit_s)
+    out = Path(args.out or Path("results") / "tune" / args.planner)
+    print(f"tuning {args.planner}: {len(candidates)} candidates x {len(problems)} non-trivial problems of "
+          f"{ds.name}'s tune split ({args.time_limit_s:g} s each) into {out}", file=sys.stderr)
+    evaluated = []
+    for i, settings in enumerate(candidates, 1):
+        config = config_dict(make_config(cls, settings, tuned=False))
+        trials = [make_trial(p, planner=args.planner, planner_config=config, run_seed=args.seed, meta=meta)
+                  for p, meta in problems]
+        run_dir = _candidate_dir(out, settings)
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / "candidate.json").write_text(json.dumps({"settings": settings, "config": config}, default=str))
+        print(f"[{i}/{len(candidates)}] {json.dumps(settings, default=str)}", file=sys.stderr)
+        run_trials(trials, out=run_dir, jobs=args.jobs, progress_bar=not args.no_progress)
+        wanted = {t.trial_id for t in trials}
+        evaluated.append((settings, [r for r in read_trials(run_dir) if r["trial_id"] in wanted]))
+    results = evaluate(evaluated)
+    objective = OBJECTIVE.get(args.planner, "time")
+    chosen = choose(results, objective=objective)
+    rows = table_rows(results, chosen=chosen)
+    _print_table(rows)
+    weak = weak_families(results, chosen=chosen)
+    print(f"chosen ({objective} objective): {json.dumps(results[chosen].settings, default=str)}"
+          + (f"; under 50% on {', '.join(weak)} where another candidate does better" if weak else ""))
+    if args.write:
+        data = {
+            "planner": args.planner,
+            "settings": results[chosen].settings,
+            "chosen_by": "python -m suite " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["tune"] else "suite tune",
+            "rule": "most distinct problems solved; ties: lowest median time to solve (failures at the budget) for "
+                    "objective 'time', lowest median length ratio on the problems every candidate solved for "
+                    "'length'; then the earlier candidate",
+            "objective": objective,
+            "dataset": {"name": ds.name, "hash": ds.hash, "split": "tune", "problems": len(problems),
+                        "per_family": args.per_family, "non_trivial_only": True},
+            "time_limit_s": args.time_limit_s,
+            "date_utc": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d"),
+            "weak_families": weak,
+            "table": rows,
+        }
+        _write_yaml(config_path(args.planner), data)
+        print(f"wrote {config_path(args.planner)}")
+    return 0
+
+
+def _print_table(rows: list[dict]) -> None:
+    from tabulate import tabulate
+
+    families = sorted({f for r in rows for f in r["by_family"]})
+    headers = ["", "settings", "solved", *families, "time to solve (s)", "planning time (s)", "length ratio (common)"]
+    body = [["*" if r["chosen"] else "", json.dumps(r["settings"], default=str), r["solved"],
+             *(r["by_family"].get(f, "-") for f in families), r["time_to_solve_median_s"],
+             r["planning_time_median_s"], r["length_ratio_common_median"]] for r in rows]
+    print(tabulate(body, headers=headers, tablefmt="simple", missingval="n/a"))
+
+
+def _write_yaml(path: Path, data: dict) -> None:
+    import yaml
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    head = (f"# {data['planner']}'s settings, chosen by `python -m suite tune --planner {data['planner']}` on the tune split\n"
+            "# of the dataset below; every run uses `settings` as this planner's defaults. `table` is every\n"
+            "# candidate's result on the same problems (the justification).\n")
+    tmp = path.with_suffix(".yaml.tmp")
+    tmp.write_text(head + yaml.safe_dump(data, sort_keys=False, width=110), encoding="utf-8")
+    tmp.replace(path)

@@ -1,0 +1,94 @@
+"""Tuning: the documented search, the choice rule, and tuned settings as every run's defaults."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import pytest
+
+from planners.registry import planner_class
+from planners.tuned import OBJECTIVE, SEARCH_SPACES, tuned_settings
+from suite.cli.tune import grid, tuning_problems
+from suite.report.tuning import CandidateResult, choose, evaluate, weak_families
+from suite.run.trial import make_config
+from tests.suite.report.test_summary import record
+
+
+@pytest.mark.parametrize("planner", sorted(SEARCH_SPACES))
+def test_every_search_starts_at_the_class_defaults(planner):
+    try:
+        cls = planner_class(planner)
+    except ImportError as exc:  # e.g. an optional dependency
+        pytest.skip(str(exc))
+    defaults = {f.name: f.default for f in dataclasses.fields(cls.Config)}
+    space = SEARCH_SPACES[planner]
+    assert set(space) <= set(defaults), f"{planner}: unknown settings in its search"
+    assert {k: v[0] for k, v in space.items()} == {k: defaults[k] for k in space}
+    assert grid(planner)[0] == {k: v[0] for k, v in space.items()}
+    assert len(grid(planner)) == math.prod(len(v) for v in space.values()) <= 8  # small, as documented
+    assert OBJECTIVE[planner] in ("time", "length")
+
+
+def _result(solved, time_s, ratio, by_family=None):
+    return CandidateResult(settings={}, problems=10, solved=solved, by_family=by_family or {},
+                           time_to_solve_median_s=time_s, planning_time_median_s=time_s,
+                           length_ratio_common_median=ratio)
+
+
+def test_choice_rule_success_first_then_the_objective_then_order():
+    results = [_result(8, 0.1, 1.5), _result(9, 0.9, 1.9), _result(9, 0.3, 1.2), _result(9, 0.3, 1.2)]
+    assert choose(results, objective="time") == 2  # most solved, then fastest, then the earlier
+    assert choose(results, objective="length") == 2
+    assert choose([_result(9, 0.3, 1.4), _result(9, 0.9, 1.1)], objective="length") == 1
+    assert choose([_result(9, math.nan, math.nan), _result(9, 0.5, 1.3)], objective="time") == 1
+
+
+def test_weak_family_is_flagged_only_when_another_candidate_does_better():
+    a = _result(5, 0.1, 1.0, {"window": (1, 4), "wall": (4, 6)})
+    b = _result(4, 0.1, 1.0, {"window": (3, 4), "wall": (1, 6)})
+    assert weak_families([a, b], chosen=0) == ["window"]
+    assert weak_families([a, b], chosen=1) == ["wall"]
+    assert weak_families([a], chosen=0) == []  # nothing documented does better
+
+
+def test_evaluate_counts_distinct_problems_and_the_common_subset():
+    fast = [record("rrt", seed=i, length_rad=1.0, time_s=0.1) for i in range(3)] + [
+        record("rrt", seed=3, status="timeout", time_s=5.0)]
+    slow = [record("rrt", seed=i, length_rad=2.0, time_s=0.4) for i in range(4)]
+    for recs in (fast, slow):
+        for r in recs:
+            if r["status"] == "success":
+                r["metrics"]["length_ratio"] = r["metrics"]["path_length_rad"]
+    a, b = evaluate([({"range_rad": None}, fast), ({"range_rad": 1.0}, slow)])
+    assert (a.solved, a.problems, b.solved) == (3, 4, 4)
+    assert (a.time_to_solve_median_s, b.time_to_solve_median_s) == (pytest.approx(0.1), pytest.approx(0.4))
+    assert (a.length_ratio_common_median, b.length_ratio_common_median) == (1.0, 2.0)  # seeds 0-2 only
+    assert choose([a, b], objective="time") == 1  # solving more wins before speed
+
+
+def test_tuned_settings_are_the_defaults_and_overrides_win(tmp_path, monkeypatch):
+    import planners.tuned as tuned
+
+    monkeypatch.setattr(tuned, "CONFIGS_DIR", tmp_path)
+    (tmp_path / "rrt.yaml").write_text("planner: rrt\nsettings: {range_rad: 0.75, simplifier: rope+full}\n")
+    cls = planner_class("rrt")
+    assert tuned_settings("rrt") == {"range_rad": 0.75, "simplifier": "rope+full"}
+    assert make_config(cls, None).range_rad == 0.75
+    assert make_config(cls, {"range_rad": 0.3}).range_rad == 0.3
+    assert make_config(cls, None, tuned=False).range_rad is None
+    (tmp_path / "rrt.yaml").write_text("planner: rrt\nsettings: [1, 2]\n")
+    from scenes.errors import SuiteError
+
+    with pytest.raises(SuiteError, match="needs a 'settings' mapping"):
+        make_config(cls, None)
+
+
+def test_tuning_sample_is_non_trivial_tune_split_problems_per_family():
+    ds, problems = tuning_problems("recycle-v1", per_family=2, time_limit_s=1.0)
+    metas = [m for _, m in problems]
+    assert all(m["split"] == "tune" and not m["trivial"] for m in metas)
+    families = [m["family"] for m in metas]
+    assert all(families.count(f) <= 2 for f in set(families)) and len(set(families)) >= 5
+    test_ids = set(__import__("suite.problems.dataset", fromlist=["x"]).load_dataset("recycle-v1:quick").ids)
+    assert not test_ids & {m["problem_id"] for m in metas}  # the quick tier (test split) is never tuned on
