@@ -157,6 +157,13 @@ class PRMConfig(OmplConfig):
 # --- the planners ----------------------------------------------------------------------------------
 
 
+#: Most (time, best cost) points recorded per solve of an optimizing planner, the slices its budget
+#: is solved in, and the shortest slice (s).
+MAX_PROGRESS_POINTS = 200
+PROGRESS_SLICES = 20
+MIN_SLICE_S = 0.01
+
+
 class _OmplPlanner:
     """One OMPL geometric planner on the problem's python-fcl world (see the module docstring)."""
 
@@ -167,6 +174,8 @@ class _OmplPlanner:
     #: whether to report the size of the planner's graph (BIT*'s PlannerData keeps the space
     #: information alive past the trial; AORRTC reports none)
     graph_stats: ClassVar[bool] = True
+    #: whether solve() may be called again to carry on (AORRTC crashes on a second call)
+    resumable: ClassVar[bool] = True
 
     def __init__(self, config: OmplConfig | None = None) -> None:
         config = self.Config() if config is None else config
@@ -222,6 +231,32 @@ class _OmplPlanner:
         stats["interpolated"] = cfg.interpolate_rad is not None
         return PlanResult(result.status, path, stats)
 
+    @staticmethod
+    def _solve_in_slices(op, budget_s: float, progress: list, t_solve: float):
+        """Solve for the budget in PROGRESS_SLICES slices (an OMPL planner's solve() carries on from
+        its tree or roadmap when called again), recording (time in the solve, best cost or None
+        before the first solution) after each slice: OMPL's planner progress properties, which its
+        Python bindings cannot return, sampled at a fixed period as OMPL's Benchmark samples them."""
+        deadline = t_solve + budget_s
+        status = None
+        while True:
+            left = deadline - time.perf_counter()
+            if left <= 0 and status is not None:
+                return status
+            slice_s = max(min(max(budget_s / PROGRESS_SLICES, MIN_SLICE_S), left), 1e-4)
+            t_slice = time.perf_counter()
+            status = op.planner.solve(ob.timedPlannerTerminationCondition(slice_s))
+            quick = time.perf_counter() - t_slice < 0.1 * slice_s  # it stopped on its own
+            if len(progress) < MAX_PROGRESS_POINTS:  # every slice, as OMPL samples at a fixed period
+                cost = (float(og.PathGeometric(op.pdef.getSolutionPath()).cost(op.objective).value())
+                        if op.pdef.hasExactSolution() else None)  # None: no solution yet
+                progress.append([round(time.perf_counter() - t_solve, 6), cost])
+            T = ob.PlannerStatus.PlannerStatusType
+            if status.getStatus() not in (T.EXACT_SOLUTION, T.APPROXIMATE_SOLUTION, T.TIMEOUT):
+                return status  # stopped on its own (no solution possible, a crash)
+            if quick and op.pdef.hasExactSolution():
+                return status  # converged or satisfied: another slice would return at once too
+
     def _attempt(self, problem: PlanningProblem, world, *, resolution_rad: float, budget_s: float,
                  seed: int) -> PlanResult:
         """One OMPL solve + simplification; every OMPL object lives only inside this call."""
@@ -234,9 +269,20 @@ class _OmplPlanner:
         op.attach(self._make(op.si))
         stats: dict[str, Any] = {"solver": self.solver, "resolution_rad": resolution_rad}
         path = simplifier = None
+        progress: list[list[float]] = []  # (time in the solve, best cost) at each improvement
         try:
             t_solve = time.perf_counter()
-            status = op.planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
+            if self.optimizing and self.resumable:
+                status = self._solve_in_slices(op, solve_budget_s, progress, t_solve)
+                stats["progress"] = progress
+            elif self.optimizing:  # one solve: its progress is the end point only
+                status = op.planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
+                progress.append([round(time.perf_counter() - t_solve, 6), (
+                    float(og.PathGeometric(op.pdef.getSolutionPath()).cost(op.objective).value())
+                    if op.pdef.hasExactSolution() else None)])
+                stats["progress"] = progress
+            else:
+                status = op.planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
             solve_time_s = time.perf_counter() - t_solve
             code = status.getStatus()
             T = ob.PlannerStatus.PlannerStatusType
@@ -348,6 +394,7 @@ class AORRTCPlanner(_OmplPlanner):
     Config = AORRTCConfig
     solver = "AORRTC"
     graph_stats = False
+    resumable = False
 
     def _make(self, si):
         p = og.AORRTC(si)

@@ -10,6 +10,9 @@ doc/markdown/benchmark.md, "The benchmark logfile format"). Facts the parser rel
 - Each run is one line of values, each followed by "; "; an empty value (or nan, inf) is NULL.
 - Planner Arena draws an enum attribute by joining the `status` column with the `enums` table,
   so the outcome enum is named "status".
+- An optimizing planner's runs may add "K progress properties for each run", the property names,
+  "N runs" and one line per run of "v1,v2,;" points (the properties in name order) before the
+  closing "."; the parser stores them in its `progress` table.
 
 Files written (in run_dir/arena/): `ompl_benchmark.log` (every trial of the run, one experiment)
 and `ompl_benchmark_<kind>.log` (one experiment per problem kind). Turn them into a database with
@@ -188,8 +191,27 @@ def benchmark_log(
         for r in mine:
             typ = {n: ("REAL" if props[n][0] == "REAL" else "INTEGER") for n in names}
             out.append("".join(f"{_value(props[n][1](r), typ[n])}; " for n in names))
+        out += _progress_lines(mine)
         out.append(".")
     return "\n".join(out) + "\n"
+
+
+#: The progress properties of an optimizing planner's runs, in the order OMPL writes them (its
+#: per-point std::map sorts them by name); Planner Arena's "Progress" tab plots them against time.
+PROGRESS_PROPERTIES = ("best cost REAL", "time REAL")
+
+
+def _progress_lines(records: Sequence[dict[str, Any]]) -> list[str]:
+    """The progress block of one planner: every run's (best cost, time) points as "c,t,;c,t,;",
+    written when any of its runs recorded progress (`stats.progress`, see planners.ompl_rrt)."""
+    series = [(r.get("stats") or {}).get("progress") for r in records]
+    if not any(series):
+        return []
+    lines = [f"{len(PROGRESS_PROPERTIES)} progress properties for each run", *PROGRESS_PROPERTIES,
+             f"{len(records)} runs"]
+    for points in series:
+        lines.append("".join(f"{'nan' if c is None else repr(float(c))},{float(t)!r},;" for t, c in (points or [])))
+    return lines
 
 
 def write_arena_logs(run_dir: str | Path, *, records: Sequence[dict] | None = None) -> list[Path]:

@@ -157,3 +157,15 @@ def test_bad_config_is_a_user_error():
         RRTConnectConfig(simplifier="magic")
     with pytest.raises(SuiteError, match="takes a RRTConnectConfig"):
         make_planner("rrt", AORRTCConfig())
+
+
+def test_optimizing_planner_records_its_best_cost_over_time(transit):
+    r = make_planner("bitstar").plan(transit.with_(time_limit_s=0.6))
+    points = r.stats["progress"]
+    assert 5 <= len(points) <= 25  # one per slice of the budget (20 slices)
+    times = [t for t, _ in points]
+    assert times == sorted(times) and times[-1] <= 0.6
+    costs = [c for _, c in points if c is not None]
+    assert r.status is not PlanStatus.SUCCESS or costs  # a success had a solution at some slice
+    assert all(b <= a + 1e-9 for a, b in zip(costs, costs[1:]))  # the best cost never worsens
+    assert "progress" not in make_planner("rrt").plan(transit).stats  # a feasibility planner has none

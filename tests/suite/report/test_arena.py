@@ -94,8 +94,18 @@ def parse_log(text: str) -> dict:
             values = line.split("; ")[:-1]
             assert len(values) == len(props)
             runs.append(dict(zip([p for p, _ in props], values)))
-        assert next(it) == "."
-        out["planners"][pname] = {"common": dict(common), "props": dict(props), "runs": runs}
+        line = next(it)
+        progress = []
+        if line.endswith(" progress properties for each run"):
+            names = [next(it) for _ in range(int(line.split()[0]))]
+            assert all(n.rsplit(" ", 1)[1] in PROPERTY_TYPES for n in names) and "time REAL" in names
+            assert int(take(" runs")) == len(runs)
+            for _ in runs:
+                points = next(it).split(";")[:-1]
+                progress.append([dict(zip(names, p.split(",")[:-1])) for p in points])
+            line = next(it)
+        assert line == "."
+        out["planners"][pname] = {"common": dict(common), "props": dict(props), "runs": runs, "progress": progress}
     assert next(it, None) is None, "nothing after the last planner"
     return out
 
@@ -184,3 +194,26 @@ def test_ompl_benchmark_statistics_script(run_dir, tmp_path):
     subprocess.run([sys.executable, os.environ["OMPL_BENCHMARK_STATISTICS"], "-d", str(db), *map(str, logs)],
                    check=True, capture_output=True, cwd=tmp_path)
     _check_database(db, n_runs=20)
+
+
+def test_optimizing_planners_progress_goes_to_the_progress_block(tmp_path):
+    records = synthetic_records(seeds=(0,), variants=("open",), cans=1, planners=("rrtstar", "rrt"), rng_seed=3)
+    for r in records:
+        if r["planner"] == "rrtstar":
+            r.setdefault("stats", {})["progress"] = [[0.05, None], [0.1, 2.5], [0.15, 2.25]]
+    log = parse_log(benchmark_log(records, experiment="progress"))
+    star, rrt = log["planners"]["rrtstar"], log["planners"]["rrt"]
+    assert rrt["progress"] == []  # a feasibility planner reports none
+    assert len(star["progress"]) == len(star["runs"])
+    assert star["progress"][0] == [{"best cost REAL": "nan", "time REAL": "0.05"},
+                                   {"best cost REAL": "2.5", "time REAL": "0.1"},
+                                   {"best cost REAL": "2.25", "time REAL": "0.15"}]
+    tools = pytest.importorskip("ompl.tools")
+    if not hasattr(tools, "readBenchmarkLog"):
+        pytest.skip("this OMPL build has no readBenchmarkLog")
+    path = tmp_path / "progress.log"
+    path.write_text(benchmark_log(records, experiment="progress"))
+    db = tmp_path / "benchmark.db"
+    tools.readBenchmarkLog(str(db), [str(path)], False)
+    rows = sqlite3.connect(db).execute("SELECT time, best_cost FROM progress ORDER BY runid, time").fetchall()
+    assert len(rows) == 3 * len(star["runs"]) and rows[1] == (0.1, 2.5)
