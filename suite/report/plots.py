@@ -30,13 +30,14 @@ log = logging.getLogger(__name__)
 
 
 def make_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None,
-               executions: Sequence[dict] = ()) -> list[Path]:
+               executions: Sequence[dict] = (), budget_records: Sequence[dict] = ()) -> list[Path]:
     """Draw every figure of a run into run_dir/plots/.
 
     Args:
         run_dir: the run directory (with trials.jsonl and, optionally, manifest.json).
         records: the run's records if already read (default: read run_dir/trials.jsonl).
         executions: the run's physics execution records (adds execution.png).
+        budget_records: a run at several budgets, with its own planner names (adds budget_curves.png).
 
     Returns:
         The PNG files written.
@@ -78,5 +79,10 @@ def make_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None,
             written.append(p)
     if executions:
         written.append(plot_execution(executions, planners=planners, path=out_dir / "execution.png"))
+    if budget_records:
+        from suite.report.budgets import plot_budget_curves
+
+        written.append(plot_budget_curves(budget_records, planners=planners_in(budget_records, manifest),
+                                          path=out_dir / "budget_curves.png"))
     log.info("wrote %d plots to %s", len(written), out_dir)
     return written

@@ -132,6 +132,7 @@ def write_summary(
     seed: int = 0,
     title: str | None = None,
     executions: Sequence[dict[str, Any]] = (),
+    budget_records: Sequence[dict[str, Any]] = (),
 ) -> list[Path]:
     """Write summary.md, summary.json, summary.csv (per planner, per planner x kind, per planner x
     family) and paired.csv.
@@ -143,6 +144,8 @@ def write_summary(
         seed: seeds the bootstrap's generator, so the written CIs are reproducible.
         title: the summary's heading (default: "Run summary: <run directory name>").
         executions: the run's physics execution records (execution.json), if it was executed.
+        budget_records: a run at several budgets: its records with their own planner names (adds
+            the per-budget table; `records` then name each planner and budget apart).
 
     Returns:
         The written files.
@@ -153,6 +156,13 @@ def write_summary(
     md_path, csv_path, paired_path = run_dir / "summary.md", run_dir / "summary.csv", run_dir / "paired.csv"
     json_path = run_dir / "summary.json"
     md = summary_markdown(records, pairs=pairs, planners=planners, title=title or f"Run summary: {run_dir.name}")
+    if budget_records:
+        from suite.report.budgets import budget_table
+
+        md += ("\n## By budget\n\nEach planner at each budget (`compare --budgets`): distinct problems solved, "
+               "the 95% Wilson interval of the rate, and the median length / reference of the solved ones, over "
+               "all families and per family.\n\n"
+               + budget_table(budget_records, planners=planners_in(budget_records)) + "\n")
     if executions:
         md += "\n" + EXECUTION_INTRO + "\n" + execution_table(executions, planners=planners) + "\n"
     md_path.write_text(md, encoding="utf-8")

@@ -35,18 +35,23 @@ def write_report(run_dir: str | Path, *, plots: bool = True, seed: int = 0) -> s
         raise SuiteError(f"run directory {str(run_dir)!r} does not exist")
     if not (run_dir / TRIALS_FILE).is_file():
         raise SuiteError(f"run directory {str(run_dir)!r} holds no {TRIALS_FILE}")
-    records = read_trials(run_dir / TRIALS_FILE)
+    from suite.report.budgets import budgets_in, by_budget_view
+
+    raw = read_trials(run_dir / TRIALS_FILE)
+    records = by_budget_view(raw)  # several budgets: each (planner, budget) is its own entry
+    budget_records = raw if len(budgets_in(raw)) > 1 else []
     planners = planners_in(records, read_manifest(run_dir))
     from suite.execution.jobs import read_execution
     from suite.report.summary_execution import execution_table
 
     executions = read_execution(run_dir)
-    written = write_summary(run_dir, records, planners=planners, seed=seed, executions=executions)
+    written = write_summary(run_dir, records, planners=planners, seed=seed, executions=executions,
+                            budget_records=budget_records)
     written += write_arena_logs(run_dir, records=records)
     if plots:
         from suite.report.plots import make_plots
 
-        written += make_plots(run_dir, records=records, executions=executions)
+        written += make_plots(run_dir, records=records, executions=executions, budget_records=budget_records)
     log.debug("wrote %s", ", ".join(str(p) for p in written))
     table = summary_table(records, planners=planners)
     if executions:
