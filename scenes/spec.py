@@ -10,12 +10,13 @@ generator draws a concrete station from them with the scene's seed.
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
+import pydantic
 import yaml
+from pydantic import Field
 
 from scenes.errors import SuiteError
 
@@ -246,82 +247,201 @@ def _merge(base: dict, override: dict) -> dict:
     return out
 
 
-def _vec(raw: Any, n: int, field: str, *, positive: bool = False) -> tuple[float, ...]:
-    if not isinstance(raw, (list, tuple)) or len(raw) != n:
-        raise SuiteError(f"scene spec field '{field}' must be a list of {n} numbers, got {raw!r}")
-    out = []
-    for v in raw:
-        x = _num(v, field)
-        if positive and not x > 0:
-            raise SuiteError(f"scene spec field '{field}' must be positive, got {raw!r}")
-        out.append(x)
-    return tuple(out)
+# The raw YAML sections as pydantic models: every field's type and bounds in one place. Numbers
+# are strict (no "3" -> 3, no true -> 1) and finite; unknown fields are refused.
+_Num = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+_Pos = Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0)]
+_NonNeg = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0)]
+_Unit = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0, le=1)]
+_Vec2 = tuple[_Num, _Num]
+_Vec3 = tuple[_Num, _Num, _Num]
+_PosVec3 = tuple[_Pos, _Pos, _Pos]
+_Rgba = tuple[_Unit, _Unit, _Unit, _Unit]
 
 
-def _num(raw: Any, field: str, *, positive: bool = False, nonneg: bool = False) -> float:
-    if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not math.isfinite(raw):
-        raise SuiteError(f"scene spec field '{field}' must be a finite number, got {raw!r}")
-    if positive and not raw > 0:
-        raise SuiteError(f"scene spec field '{field}' must be positive, got {raw!r}")
-    if nonneg and raw < 0:
-        raise SuiteError(f"scene spec field '{field}' must be >= 0, got {raw!r}")
-    return float(raw)
+class _Section(pydantic.BaseModel):
+    model_config = pydantic.ConfigDict(extra="forbid", frozen=True)
 
 
-def _rgba(raw: Any, field: str) -> tuple[float, float, float, float]:
-    v = _vec(raw, 4, field)
-    if any(not 0 <= c <= 1 for c in v):
-        raise SuiteError(f"scene spec field '{field}' must hold 4 values in [0, 1], got {raw!r}")
-    return v  # type: ignore[return-value]
+class _TableIn(_Section):
+    size_m: _PosVec3
+    center_xy_m: _Vec2
+    color_rgba: _Rgba
 
 
-def _section(raw: dict, key: str, allowed: set[str], prefix: str = "", optional: frozenset = frozenset()) -> dict:
-    name = f"{prefix}{key}"
-    sec = raw.get(key)
-    if not isinstance(sec, dict):
-        raise SuiteError(f"scene spec field '{name}' is missing or not a mapping")
-    unknown = set(sec) - allowed
-    if unknown:
-        raise SuiteError(
-            f"scene spec field '{name}.{sorted(unknown)[0]}' is unknown; allowed: {sorted(allowed)}"
-        )
-    missing = allowed - set(sec) - optional
-    if missing:
-        raise SuiteError(f"scene spec field '{name}.{sorted(missing)[0]}' is missing")
-    return sec
+class _BoxIn(_Section):
+    center_m: _Vec3
+    size_m: _PosVec3
+    color_rgba: _Rgba
 
 
-def _box(raw: dict, key: str) -> Box:
-    s = _section(raw, key, {"center_m", "size_m", "color_rgba"})
-    return Box(
-        _vec(s["center_m"], 3, f"{key}.center_m"),  # type: ignore[arg-type]
-        _vec(s["size_m"], 3, f"{key}.size_m", positive=True),  # type: ignore[arg-type]
-        _rgba(s["color_rgba"], f"{key}.color_rgba"),
-    )
+class _BinIn(_Section):
+    center_xy_m: _Vec2
+    outer_size_m: _PosVec3
+    wall_thickness_m: _Pos
+    color_rgba: _Rgba
+
+    @pydantic.field_validator("wall_thickness_m")
+    @classmethod
+    def _room_inside(cls, v: float, info: pydantic.ValidationInfo) -> float:
+        outer = info.data.get("outer_size_m")
+        if outer is not None and 2 * v >= min(outer[:2]):
+            raise ValueError(f"leaves no room inside the bin: allowed below half of {min(outer[:2])}")
+        return v
 
 
-def parse_spec(raw: Any, *, variant: str) -> SceneSpec:
+class _CanIn(_Section):
+    radius_m: _Pos
+    height_m: _Pos
+    mass_kg: _Pos
+    color_rgba: _Rgba
+
+
+class _CansIn(_Section):
+    count: Annotated[int, Field(strict=True, ge=0)]
+    min_gap_m: _NonNeg
+    edge_margin_m: _NonNeg
+    lying_probability: _Unit
+    placement: Literal["random", "pickable"] = "random"
+
+
+class _GraspIn(_Section):
+    top_offset_m: _NonNeg
+    pregrasp_height_m: _Pos
+    open_width_m: _Pos
+    held_margin_m: _NonNeg
+
+
+class _WaypointsIn(_Section):
+    above_plate_m: _Vec3
+    middle_m: _Vec3
+    above_bin_m: _Vec3
+
+
+class _CameraPoseIn(_Section):
+    p_m: _Vec3
+    target_m: _Vec3
+
+    @pydantic.field_validator("target_m")
+    @classmethod
+    def _apart(cls, v, info: pydantic.ValidationInfo):
+        if info.data.get("p_m") == v:
+            raise ValueError("allowed: a target apart from p_m")
+        return v
+
+
+class _CamerasIn(_Section):
+    width_px: Annotated[int, Field(strict=True, gt=0)]
+    height_px: Annotated[int, Field(strict=True, gt=0)]
+    fov_y_deg: Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0, lt=180)]
+    clipping_m: tuple[_Pos, _Pos]
+    poses: Annotated[dict[str, _CameraPoseIn], Field(min_length=1)]
+
+    @pydantic.field_validator("clipping_m")
+    @classmethod
+    def _near_far(cls, v):
+        if v[0] >= v[1]:
+            raise ValueError("allowed: [near, far] with near < far")
+        return v
+
+
+class _SpecIn(_Section):
+    table: _TableIn
+    plate: _BoxIn
+    bin: _BinIn
+    can: _CanIn
+    cans: _CansIn
+    grasp: _GraspIn
+    waypoints: _WaypointsIn
+    cameras: _CamerasIn
+    wall: _BoxIn | None = None
+
+
+def _error_line(exc: pydantic.ValidationError, data: Any, *, where: str) -> str:
+    """The first validation error as one line: the field, its value and what is allowed."""
+    import re
+
+    err = exc.errors(include_url=False)[0]
+    loc = list(err["loc"])
+    items = []
+    while loc and isinstance(loc[-1], int):  # an element of a list: name the list, show it whole
+        items.insert(0, str(loc.pop()))
+    field = ".".join(str(x) for x in loc) or "(top level)"
+    if err["type"] == "extra_forbidden":
+        return f"{where}field '{field}' is unknown; allowed: {_allowed_at(loc[:-1])}"
+    if err["type"] == "missing" and not items:
+        return f"{where}field '{field}' is missing"
+    value = _lookup(data, loc)
+    if err["type"] == "missing":
+        msg = f"item {items[-1]} is missing: the list is too short"
+    else:
+        msg = re.sub(r" or instance of \w+", "", err["msg"]).removeprefix("Value error, ")
+        msg = msg.replace("a valid tuple", "a list").replace("Tuple should", "the list should")
+        msg = msg[0].lower() + msg[1:]
+    at = f" (item {'.'.join(items)})" if items and err["type"] != "missing" else ""
+    return f"{where}field '{field}' = {value!r}{at}: {msg}"
+
+
+def _lookup(data: Any, loc: list) -> Any:
+    for key in loc:
+        if isinstance(data, dict):
+            data = data.get(key)
+        elif isinstance(data, (list, tuple)) and isinstance(key, int) and key < len(data):
+            data = data[key]
+        else:
+            return None
+    return data
+
+
+def _allowed_at(loc: list) -> list[str]:
+    """The field names allowed in the section at `loc` (names of a mapping such as
+    cameras.poses are skipped over)."""
+    import typing
+
+    model: Any = _SpecIn
+    keys = list(loc)
+    while keys:
+        key = keys.pop(0)
+        info = getattr(model, "model_fields", {}).get(key)
+        if info is None:
+            return []
+        ann = info.annotation
+        while typing.get_origin(ann) is Annotated:
+            ann = typing.get_args(ann)[0]
+        if typing.get_origin(ann) is dict:
+            ann = typing.get_args(ann)[1]
+            if keys:
+                keys.pop(0)  # the entry's name
+        model = next((a for a in (ann, *typing.get_args(ann)) if isinstance(a, type) and issubclass(a, _Section)), None)
+        if model is None:
+            return []
+    return sorted(model.model_fields)
+
+
+def parse_spec(raw: Any, *, variant: str, source: str | None = None) -> SceneSpec:
     """Build a validated `SceneSpec` from a parsed YAML mapping.
 
     Args:
         raw: the YAML document as Python objects.
         variant: the name of one entry of `variants` to apply.
+        source: the file it came from (named in error messages).
 
     Raises:
-        SuiteError: naming the first bad field.
+        SuiteError: one line naming the file, the first bad field, its value and what is allowed.
     """
+    where = f"scene spec {source}: " if source else "scene spec "
     if not isinstance(raw, dict):
-        raise SuiteError("scene spec must be a YAML mapping at the top level")
+        raise SuiteError(f"{where}must be a YAML mapping at the top level")
     top = {"table", "plate", "bin", "can", "cans", "grasp", "waypoints", "cameras", "variants", "families"}
     unknown = set(raw) - top
     if unknown:
-        raise SuiteError(f"scene spec field '{sorted(unknown)[0]}' is unknown; allowed: {sorted(top)}")
+        raise SuiteError(f"{where}field '{sorted(unknown)[0]}' is unknown; allowed: {sorted(top)}")
     variants = raw.get("variants") or {}
     if not isinstance(variants, dict):
-        raise SuiteError("scene spec field 'variants' must be a mapping of name -> overrides")
+        raise SuiteError(f"{where}field 'variants' must be a mapping of name -> overrides")
     families = raw.get("families") or {}
     if not isinstance(families, dict):
-        raise SuiteError("scene spec field 'families' must be a mapping of name -> family")
+        raise SuiteError(f"{where}field 'families' must be a mapping of name -> family")
     family = None
     if variant in families:
         from scenes.family_ranges import parse_family
@@ -330,107 +450,43 @@ def parse_spec(raw: Any, *, variant: str) -> SceneSpec:
         family = parse_family(fam, name=variant)
         base = fam.get("base", "open")
         if base not in variants:
-            raise SuiteError(f"scene spec field 'families.{variant}.base' = {base!r}: allowed: {sorted(variants)}")
+            raise SuiteError(f"{where}field 'families.{variant}.base' = {base!r}: allowed: {sorted(variants)}")
         fam_over = fam.get("overrides") or {}
         if not isinstance(fam_over, dict):
-            raise SuiteError(f"scene spec field 'families.{variant}.overrides' must be a mapping")
+            raise SuiteError(f"{where}field 'families.{variant}.overrides' must be a mapping")
         override = _merge(variants[base] or {}, fam_over)
     elif variant in variants:
         override = variants[variant] or {}
     else:
         raise SuiteError(f"unknown variant {variant!r}; allowed: {sorted([*variants, *families])}")
     if not isinstance(override, dict):
-        raise SuiteError(f"scene spec field 'variants.{variant}' must be a mapping")
-    wall_raw = override.get("wall")
-    merged = _merge({k: v for k, v in raw.items() if k not in ("variants", "families")},
-                    {k: v for k, v in override.items() if k != "wall"})
+        raise SuiteError(f"{where}field 'variants.{variant}' must be a mapping")
+    merged = _merge({k: v for k, v in raw.items() if k not in ("variants", "families")}, override)
+    try:
+        m = _SpecIn.model_validate(merged)
+    except pydantic.ValidationError as exc:
+        raise SuiteError(_error_line(exc, merged, where=where)) from None
 
-    t = _section(merged, "table", {"size_m", "center_xy_m", "color_rgba"})
-    size = _vec(t["size_m"], 3, "table.size_m", positive=True)
-    cxy = _vec(t["center_xy_m"], 2, "table.center_xy_m")
-    table = Box((cxy[0], cxy[1], -size[2] / 2), size, _rgba(t["color_rgba"], "table.color_rgba"))  # type: ignore[arg-type]
-
-    b = _section(merged, "bin", {"center_xy_m", "outer_size_m", "wall_thickness_m", "color_rgba"})
-    bin_spec = BinSpec(
-        _vec(b["center_xy_m"], 2, "bin.center_xy_m"),  # type: ignore[arg-type]
-        _vec(b["outer_size_m"], 3, "bin.outer_size_m", positive=True),  # type: ignore[arg-type]
-        _num(b["wall_thickness_m"], "bin.wall_thickness_m", positive=True),
-        _rgba(b["color_rgba"], "bin.color_rgba"),
-    )
-    if 2 * bin_spec.wall_thickness_m >= min(bin_spec.outer_size_m[:2]):
-        raise SuiteError("scene spec field 'bin.wall_thickness_m' leaves no room inside the bin")
-
-    c = _section(merged, "can", {"radius_m", "height_m", "mass_kg", "color_rgba"})
-    can = CanModel(
-        _num(c["radius_m"], "can.radius_m", positive=True),
-        _num(c["height_m"], "can.height_m", positive=True),
-        _num(c["mass_kg"], "can.mass_kg", positive=True),
-        _rgba(c["color_rgba"], "can.color_rgba"),
-    )
-    g = _section(merged, "cans", {"count", "min_gap_m", "edge_margin_m", "lying_probability", "placement"},
-                 optional=frozenset({"placement"}))
-    placement = g.get("placement", "random")
-    if placement not in ("random", "pickable"):
-        raise SuiteError(f"scene spec field 'cans.placement' = {placement!r}: allowed: ['pickable', 'random']")
-    count = g["count"]
-    if isinstance(count, bool) or not isinstance(count, int) or count < 0:
-        raise SuiteError(f"scene spec field 'cans.count' must be an integer >= 0, got {count!r}")
-    lying_p = _num(g["lying_probability"], "cans.lying_probability")
-    if not 0 <= lying_p <= 1:
-        raise SuiteError(f"scene spec field 'cans.lying_probability' must be in [0, 1], got {lying_p}")
-    gen = CanGenerator(
-        count,
-        _num(g["min_gap_m"], "cans.min_gap_m", nonneg=True),
-        _num(g["edge_margin_m"], "cans.edge_margin_m", nonneg=True),
-        lying_p,
-        placement,
-    )
-    gr = _section(merged, "grasp", {"top_offset_m", "pregrasp_height_m", "open_width_m", "held_margin_m"})
-    grasp = GraspSpec(
-        _num(gr["top_offset_m"], "grasp.top_offset_m", nonneg=True),
-        _num(gr["pregrasp_height_m"], "grasp.pregrasp_height_m", positive=True),
-        _num(gr["open_width_m"], "grasp.open_width_m", positive=True),
-        _num(gr["held_margin_m"], "grasp.held_margin_m", nonneg=True),
-    )
-    w = _section(merged, "waypoints", {"above_plate_m", "middle_m", "above_bin_m"})
-    waypoints = Waypoints(*(_vec(w[k], 3, f"waypoints.{k}") for k in ("above_plate_m", "middle_m", "above_bin_m")))  # type: ignore[arg-type]
-
-    cam = _section(merged, "cameras", {"width_px", "height_px", "fov_y_deg", "clipping_m", "poses"})
-    for key in ("width_px", "height_px"):
-        v = cam[key]
-        if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-            raise SuiteError(f"scene spec field 'cameras.{key}' must be a positive integer, got {v!r}")
-    fov = _num(cam["fov_y_deg"], "cameras.fov_y_deg", positive=True)
-    if fov >= 180:
-        raise SuiteError(f"scene spec field 'cameras.fov_y_deg' must be below 180, got {fov}")
-    clip = _vec(cam["clipping_m"], 2, "cameras.clipping_m", positive=True)
-    if clip[0] >= clip[1]:
-        raise SuiteError(f"scene spec field 'cameras.clipping_m' must be [near, far] with near < far, got {list(clip)}")
-    if not isinstance(cam["poses"], dict) or not cam["poses"]:
-        raise SuiteError("scene spec field 'cameras.poses' must map camera names to poses")
-    poses = {}
-    for name, pose in cam["poses"].items():
-        p = _section(cam["poses"], name, {"p_m", "target_m"}, prefix="cameras.poses.")
-        poses[str(name)] = CameraPose(
-            _vec(p["p_m"], 3, f"cameras.poses.{name}.p_m"),  # type: ignore[arg-type]
-            _vec(p["target_m"], 3, f"cameras.poses.{name}.target_m"),  # type: ignore[arg-type]
-        )
-        if poses[str(name)].p_m == poses[str(name)].target_m:
-            raise SuiteError(f"scene spec field 'cameras.poses.{name}' has p_m equal to target_m")
-    cameras = CameraSpec(int(cam["width_px"]), int(cam["height_px"]), fov, clip, poses)  # type: ignore[arg-type]
-
-    wall = _box({"wall": wall_raw}, "wall") if wall_raw is not None else None
+    t = m.table
+    table = Box((t.center_xy_m[0], t.center_xy_m[1], -t.size_m[2] / 2), t.size_m, t.color_rgba)
+    b = m.bin
+    c = m.can
+    g = m.cans
+    gr = m.grasp
+    w = m.waypoints
+    cam = m.cameras
+    poses = {str(name): CameraPose(p.p_m, p.target_m) for name, p in cam.poses.items()}
     return SceneSpec(
         variant=variant,
         table=table,
-        plate=_box(merged, "plate"),
-        bin=bin_spec,
-        can=can,
-        cans=gen,
-        grasp=grasp,
-        waypoints=waypoints,
-        cameras=cameras,
-        wall=wall,
+        plate=Box(m.plate.center_m, m.plate.size_m, m.plate.color_rgba),
+        bin=BinSpec(b.center_xy_m, b.outer_size_m, b.wall_thickness_m, b.color_rgba),
+        can=CanModel(c.radius_m, c.height_m, c.mass_kg, c.color_rgba),
+        cans=CanGenerator(g.count, g.min_gap_m, g.edge_margin_m, g.lying_probability, g.placement),
+        grasp=GraspSpec(gr.top_offset_m, gr.pregrasp_height_m, gr.open_width_m, gr.held_margin_m),
+        waypoints=Waypoints(w.above_plate_m, w.middle_m, w.above_bin_m),
+        cameras=CameraSpec(cam.width_px, cam.height_px, cam.fov_y_deg, cam.clipping_m, poses),
+        wall=None if m.wall is None else Box(m.wall.center_m, m.wall.size_m, m.wall.color_rgba),
         family=family,
     )
 
@@ -453,14 +509,31 @@ def loads_spec(text: str, *, variant: str = "open", source: str = "<string>") ->
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         raise SuiteError(f"scene spec {source} is not valid YAML{where}") from None
-    return parse_spec(raw, variant=variant)
+    return parse_spec(raw, variant=variant, source=None if source == "<string>" else source)
 
 
 def available_variants(path: str | Path | None = None) -> list[str]:
-    """The variant names a spec file defines."""
+    """The variant names a spec file defines.
+
+    Raises:
+        SuiteError: the file cannot be read or is not a YAML mapping.
+    """
     path = Path(path) if path is not None else DEFAULT_SPEC_PATH
-    raw = yaml.safe_load(path.read_text()) or {}
-    return sorted([*(raw.get("variants") or {}), *(raw.get("families") or {})])
+    try:
+        raw = yaml.safe_load(path.read_text()) or {}
+    except OSError as exc:
+        raise SuiteError(f"cannot read scene spec {str(path)!r}: {exc.strerror}") from None
+    except yaml.YAMLError:
+        raise SuiteError(f"scene spec {path} is not valid YAML") from None
+    if not isinstance(raw, dict):
+        raise SuiteError(f"scene spec {path}: must be a YAML mapping at the top level")
+    names = []
+    for key in ("variants", "families"):
+        section = raw.get(key) or {}
+        if not isinstance(section, dict):
+            raise SuiteError(f"scene spec {path}: field '{key}' must be a mapping of name -> settings")
+        names += [str(n) for n in section]
+    return sorted(names)
 
 
 def spec_from_dict(data: dict[str, Any]) -> SceneSpec:

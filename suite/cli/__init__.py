@@ -12,6 +12,7 @@ import logging
 import sys
 
 from scenes.errors import SuiteError
+from suite.run.interrupt import Interrupted
 
 #: subcommand -> (module, one-line help). The module defines add_arguments(parser) and run(args).
 COMMANDS = {
@@ -24,6 +25,8 @@ COMMANDS = {
     "tune": ("suite.cli.tune", "choose a planner's settings on a dataset's tuning split (planners/configs/NAME.yaml)"),
     "plot": ("suite.cli.plot", "redraw the plots and tables of a run from its trials.jsonl"),
     "rescore": ("suite.cli.rescore", "recompute every metric of a run from its stored paths, then redraw its report"),
+    "export": ("suite.cli.export", "write a dataset's problems as files any planner can read (problems, schema, URDFs)"),
+    "import": ("suite.cli.import_", "judge an external planner's paths like a suite trial and add them as records"),
     "bench": ("suite.cli.bench", "print speed figures (collision, perception, planners)"),
 }
 
@@ -79,6 +82,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except Interrupted as exc:  # SIGINT/SIGTERM under a command's SignalGuard: no traceback
+        print(f"interrupted by {exc.name}", file=sys.stderr)
+        return exc.exit_code
     except BrokenPipeError:  # e.g. piped into `head`: the reader has gone, nothing to report
         sys.stderr.close()
         return 0

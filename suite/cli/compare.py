@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime as dt
+import multiprocessing
 import sys
 import time
 from pathlib import Path
@@ -13,13 +14,14 @@ import yaml
 
 from suite.cli.args import nonneg_int, positive_float, positive_int
 from scenes.errors import SuiteError
+from suite.run.lock import RunLock
 from suite.run.runner import TRIALS_FILE, CompareConfig
 
 RESULTS_DIR = Path("results")
 #: Flags that describe generated scenes (they cannot be combined with --dataset).
 GENERATED_FLAGS = ("variant", "scenes", "cans", "grasps")
 #: Settings of how a run executes, which a resumed run may change (its records do not depend on them).
-HOW_IT_RUNS = ("jobs", "executor", "scheduler")
+HOW_IT_RUNS = ("jobs", "executor", "scheduler", "memory_limit_mb")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -37,7 +39,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"generated scenes' grasps from perception or from ground truth (default {d.grasps})")
     p.add_argument("--time-limit-s", type=positive_float, default=None,
                    help=f"planning budget per problem, seconds (default {d.time_limit_s})")
-    p.add_argument("--jobs", type=positive_int, default=None, help=f"worker processes (default {d.jobs})")
+    p.add_argument("--jobs", type=positive_int, default=None,
+                   help=f"worker processes, at most one per pending trial (default {d.jobs})")
+    p.add_argument("--memory-limit-mb", type=positive_int, default=None,
+                   help=f"address-space cap of each worker process, MiB; a trial beyond it is recorded as a crash "
+                        f"(out_of_memory) (default {d.memory_limit_mb})")
     p.add_argument("--out", default=None, help="run directory (default results/<UTC timestamp>)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out, skipping recorded trials")
     p.add_argument("--config", default=None, metavar="YAML", help="settings from a YAML file (flags override it)")
@@ -65,7 +71,7 @@ def _config_file(path: str) -> dict:
     fields = {f.name for f in dataclasses.fields(CompareConfig)}
     unknown = set(raw) - fields
     if unknown:
-        raise SuiteError(f"--config: unknown setting {sorted(unknown)[0]!r}; allowed: {sorted(fields)}")
+        raise SuiteError(f"--config {path}: unknown setting {sorted(unknown)[0]!r}; allowed: {sorted(fields)}")
     return raw
 
 
@@ -95,7 +101,8 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
         values.update(from_file)
         source = f"--config {args.config}: "
         given.update({k: (f"--config {args.config} {k}", v) for k, v in from_file.items()})
-    for key in ("variant", "seed", "scenes", "cans", "grasps", "time_limit_s", "jobs", "spec", "executor", "scheduler"):
+    for key in ("variant", "seed", "scenes", "cans", "grasps", "time_limit_s", "jobs", "spec", "executor", "scheduler",
+                "memory_limit_mb"):
         v = getattr(args, key)
         if v is not None:
             values[key] = v
@@ -118,9 +125,11 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
         given["planners"] = ("--planners", values["planners"])
     if args.resume and args.out:
         values = _resumed_settings(Path(args.out), values, given)
+
     if isinstance(values["time_limit_s"], int) and not isinstance(values["time_limit_s"], bool):
         values["time_limit_s"] = float(values["time_limit_s"])
     config = _validated(values, source=source)
+    _check_planner_configs(config, source=source)
     if config.dataset:
         from suite.problems.dataset import dataset_dir, parse_dataset_arg, read_manifest
 
@@ -135,20 +144,50 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     return config
 
 
+def _check_planner_configs(config: CompareConfig, *, source: str) -> None:
+    """Each planner's settings checked against its Config dataclass's annotations (strictly, and
+    only checked: the values as given go into the trials, so their ids do not change)."""
+    import typing
+
+    import pydantic
+
+    from planners.registry import planner_class
+
+    for name, overrides in config.planner_configs.items():
+        try:
+            cfg_cls = planner_class(name).Config
+        except SuiteError as exc:
+            raise SuiteError(f"{source}planner_configs.{name}: {exc}") from None
+        hints = typing.get_type_hints(cfg_cls)
+        # only the given keys matter: every field is optional here (the dataclass has the defaults)
+        fields = {f.name: (hints[f.name], None) for f in dataclasses.fields(cfg_cls)}
+        model = pydantic.create_model(f"{name}_config", __config__=pydantic.ConfigDict(strict=True, extra="forbid"),
+                                      **fields)
+        try:
+            model.model_validate(overrides)
+        except pydantic.ValidationError as exc:
+            err = exc.errors(include_url=False)[0]
+            field = ".".join(str(x) for x in err["loc"])
+            if err["type"] == "extra_forbidden":
+                raise SuiteError(f"{source}planner_configs.{name}.{field}: unknown setting for planner {name!r}; "
+                                 f"allowed: {sorted(fields)}") from None
+            msg = err["msg"][0].lower() + err["msg"][1:]
+            raise SuiteError(f"{source}planner_configs.{name}.{field} = {err['input']!r}: {msg}") from None
+
+
 def _resumed_settings(out: Path, values: dict, given: dict[str, tuple[str, object]]) -> dict:
     """The settings of the run being resumed, from its manifest; a setting given now that
     contradicts them is one error line (nothing is appended to a run of another configuration)."""
-    import json
-
-    from suite.run.runner import MANIFEST_FILE
+    from suite.run.runner import MANIFEST_FILE, read_run_manifest
 
     path = out / MANIFEST_FILE
-    if not path.exists():
+    manifest = read_run_manifest(out)  # a newer manifest format is one error line
+    if manifest is None:
         return values  # an old run without a manifest: the flags stand (prepare_out checks the rest)
-    try:
-        stored = json.loads(path.read_text())["config"]
-    except (OSError, ValueError, KeyError):
-        raise SuiteError(f"--resume: {path} is not a readable run manifest") from None
+    stored = manifest.get("config")
+    if not isinstance(stored, dict):
+        raise SuiteError(f"--resume: {path} is not a readable run manifest")
+    stored = dict(stored)
     stored.setdefault("dataset", None)  # runs made before datasets generated their scenes
     # how the run executes may change on resume (the records do not depend on it); what it runs may not
     for key in HOW_IT_RUNS:
@@ -172,27 +211,45 @@ def _resumed_settings(out: Path, values: dict, given: dict[str, tuple[str, objec
     return resumed
 
 
-def prepare_out(args: argparse.Namespace) -> Path:
-    """The run directory, created and checked writable; with --resume it must hold a run."""
+def prepare_out(args: argparse.Namespace) -> tuple[Path, RunLock]:
+    """The run directory, created, locked for this run alone and checked writable; with --resume
+    it must hold a run, without it it must not.
+
+    The lock is taken before the directory's contents are checked, so of two runs started into
+    the same directory at once, one fails (naming the other's PID) before it writes anything.
+    """
     if args.resume:
         if not args.out:
             raise SuiteError("--resume needs --out naming the interrupted run's directory")
         out = Path(args.out)
-        if not (out / TRIALS_FILE).exists():
+        if not out.is_dir():
             raise SuiteError(f"--resume: {str(out)!r} holds no {TRIALS_FILE} to resume")
     else:
         stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
         out = Path(args.out) if args.out else RESULTS_DIR / stamp
-        if (out / TRIALS_FILE).exists():
-            raise SuiteError(f"--out {str(out)!r} already holds a run; use --resume to continue it or another --out")
+    lock = RunLock(out).acquire()
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".write-test"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as exc:
-        raise SuiteError(f"--out {str(out)!r} is not writable: {exc.strerror}") from None
-    return out
+        if args.resume and not (out / TRIALS_FILE).exists():
+            raise SuiteError(f"--resume: {str(out)!r} holds no {TRIALS_FILE} to resume")
+        if not args.resume and (out / TRIALS_FILE).exists():
+            raise SuiteError(f"--out {str(out)!r} already holds a run; use --resume to continue it or another --out")
+        try:
+            probe = out / ".write-test"
+            probe.write_text("")
+            probe.unlink()
+        except OSError as exc:
+            raise SuiteError(f"--out {str(out)!r} is not writable: {exc.strerror}") from None
+    except BaseException:
+        lock.release()
+        raise
+    return out, lock
+
+
+def resume_command(out: Path) -> str:
+    """The command that continues the run in `out` (its settings come from its manifest)."""
+    import shlex
+
+    return shlex.join(["python", "-m", "suite", "compare", "--resume", "--out", str(out)])
 
 
 def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, progress_bar: bool) -> None:
@@ -235,31 +292,97 @@ def _shared_steps(trials, steps) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from suite.run.runner import make_executor, prepare_trials, run_trials, write_manifest
+    from suite.run.interrupt import Interrupted, SignalGuard, reap_children
+    from suite.run.journal import RecordWriteError
+    from suite.run.runner import update_manifest
 
     config = resolve_config(args)
-    out = prepare_out(args)
+    before = frozenset(c.pid for c in multiprocessing.active_children())
+    with SignalGuard():
+        out, lock = prepare_out(args)
+        try:
+            return _run_locked(args, config, out)
+        except Interrupted as exc:
+            counts = _recorded_counts(out)
+            update_manifest(out, status="interrupted", interrupted_by=exc.name, stopped_utc=_now(), **counts)
+            print(f"interrupted by {exc.name}: {counts['trials_recorded']} trial(s) recorded in {out} are kept; "
+                  f"resume with: {resume_command(out)}", file=sys.stderr)
+            return exc.exit_code
+        except RecordWriteError as exc:
+            counts = _recorded_counts(out)
+            update_manifest(out, status="stopped", stop_reason=str(exc), stopped_utc=_now(), **counts)
+            raise SuiteError(f"{exc}; the run stopped with {counts['trials_recorded']} trial(s) kept; once the cause "
+                             f"is fixed, resume with: {resume_command(out)}") from None
+        finally:
+            reap_children(keep=before)  # no worker outlives the run, however it ended
+            lock.release()
+
+
+def _now() -> str:
+    return dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+
+
+#: The trial count of the run in progress (for the manifest of an interrupted run).
+_TOTAL_TRIALS: dict[str, int] = {}
+
+
+def _recorded_counts(out: Path) -> dict[str, int | None]:
+    from suite.run.runner import recorded_trial_ids
+
+    try:
+        recorded = len(recorded_trial_ids(out / TRIALS_FILE))
+    except (OSError, SuiteError):
+        recorded = None
+    return {"trials_recorded": recorded, "trials_total": _TOTAL_TRIALS.get(str(out))}
+
+
+def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path) -> int:
+    """The run, with `out` locked: manifest, problems, trials, execution, report."""
+    from suite.run.executors import cap_workers
+    from suite.run.runner import (
+        make_executor,
+        prepare_trials,
+        recorded_trial_ids,
+        run_trials,
+        update_manifest,
+        write_manifest,
+    )
+
     t0 = time.perf_counter()
     print(f"run directory: {out}", file=sys.stderr)
-    if not args.resume:
+    if args.resume:
+        update_manifest(out, status="running", resumed_utc=_now())
+    else:
         write_manifest(out, config, argv=sys.argv[1:])
+        (out / TRIALS_FILE).touch()  # the directory now holds a run, even before its first record
     if config.dataset:
         print(f"loading dataset {config.dataset}...", file=sys.stderr)
+        trials = prepare_trials(config)  # fast (no IK): the pending count caps the workers
+        done = recorded_trial_ids(out / TRIALS_FILE)
+        n_workers = cap_workers(config.jobs, sum(t.trial_id not in done for t in trials))
+        executor = make_executor(config.executor, jobs=n_workers, scheduler=config.scheduler,
+                                 memory_limit_mb=config.memory_limit_mb)
     else:
         print(f"preparing {config.scenes} {config.variant} scene(s) of {config.cans} cans "
               f"({config.grasps} grasps)...", file=sys.stderr)
-    executor = make_executor(config.executor, jobs=config.jobs, scheduler=config.scheduler)
-    if hasattr(executor, "start"):
-        executor.start()  # the workers import Drake and OMPL while the problems are prepared
-    try:
-        trials = prepare_trials(config)
-    except BaseException:
-        if hasattr(executor, "close"):
-            executor.close()
-        raise
+        # at most 5 problems per can and planner: no more workers than that, even before they are known
+        bound = config.scenes * config.cans * 5 * len(config.planners)
+        executor = make_executor(config.executor, jobs=min(config.jobs, bound), scheduler=config.scheduler,
+                                 memory_limit_mb=config.memory_limit_mb)
+        if hasattr(executor, "start"):
+            executor.start()  # the workers import Drake and OMPL while the scenes are prepared
+        try:
+            trials = prepare_trials(config)
+        except BaseException:
+            if hasattr(executor, "abort"):
+                executor.abort()
+            raise
+    _TOTAL_TRIALS[str(out)] = len(trials)
     counts = run_trials(trials, out=out, jobs=config.jobs, executor=executor,
                         scheduler=config.scheduler, progress_bar=not args.no_progress,
                         hard_limit_grace_s=config.hard_limit_grace_s)
+    update_manifest(out, status="complete", finished_utc=_now(),
+                    trials_recorded=counts["skipped"] + counts["ran"], trials_total=counts["total"])
     if args.execute or args.reperceive:
         _execute(trials, out, config, reperceive=args.reperceive, progress_bar=not args.no_progress)
     from suite.report.write import write_report

@@ -53,7 +53,15 @@ def _build(args: argparse.Namespace) -> int:
     settings = BuildSettings(name=args.name, families=families, scenes=args.scenes, cans=args.cans, seed=args.seed,
                              reference_time_s=args.reference_time_s, quick_problems=args.quick_problems,
                              jobs=args.jobs)
-    manifest = build_dataset(settings, argv=sys.argv[1:], progress_bar=not args.no_progress)
+    from suite.run.interrupt import Interrupted, SignalGuard
+
+    with SignalGuard():
+        try:
+            manifest = build_dataset(settings, argv=sys.argv[1:], progress_bar=not args.no_progress)
+        except Interrupted as exc:
+            print(f"interrupted by {exc.name}: nothing written (a dataset is written only when complete); "
+                  f"run the same command again to build it", file=sys.stderr)
+            return exc.exit_code
     c = manifest["counts"]
     print(f"dataset {manifest['name']} ({manifest['hash']}): {c['problems']} problems in {c['scenes']} scenes, "
           f"{c['trivial']} trivial; quick tier {len(manifest['tiers']['quick'])}; dropped {c['unsolved_dropped']} "

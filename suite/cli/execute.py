@@ -52,21 +52,28 @@ def run(args: argparse.Namespace) -> int:
         if args.contact_model not in CONTACT_MODELS:
             raise SuiteError(f"unknown --contact-model {args.contact_model!r}; allowed: {', '.join(CONTACT_MODELS)}")
         overrides["contact_model"] = args.contact_model
+    from suite.run.interrupt import Interrupted, SignalGuard
+
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise SuiteError(f"--out {str(out)!r} cannot be created: {exc.strerror}") from None
-    scene = scene_from_args(args)
-    job = ExecutionJob(
-        planner=args.planner, planner_config=config_dict(make_config(cls, None)), scene=scene,
-        grasps=args.grasps, time_limit_s=args.time_limit_s, seed=args.seed, reperceive=args.reperceive,
-        replay_path=None if args.no_replay else str(out / f"replay_{args.planner}.html"),
-        config=ExecutionConfig(**overrides),
-    )
-    print(f"planning and executing {len(scene.cans)} can(s) of {scene.variant} seed {scene.seed} "
-          f"with {args.planner}...", file=sys.stderr)
-    records = run_jobs([job], workers=1, progress_bar=False)
+    with SignalGuard():
+        try:
+            try:
+                out.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise SuiteError(f"--out {str(out)!r} cannot be created: {exc.strerror}") from None
+            scene = scene_from_args(args)
+            job = ExecutionJob(
+                planner=args.planner, planner_config=config_dict(make_config(cls, None)), scene=scene,
+                grasps=args.grasps, time_limit_s=args.time_limit_s, seed=args.seed, reperceive=args.reperceive,
+                replay_path=None if args.no_replay else str(out / f"replay_{args.planner}.html"),
+                config=ExecutionConfig(**overrides),
+            )
+            print(f"planning and executing {len(scene.cans)} can(s) of {scene.variant} seed {scene.seed} "
+                  f"with {args.planner}...", file=sys.stderr)
+            records = run_jobs([job], workers=1, progress_bar=False)
+        except Interrupted as exc:
+            print(f"interrupted by {exc.name}: nothing written to {out}", file=sys.stderr)
+            return exc.exit_code
     path = write_execution(out, records)
     print_outcomes(records)
     print(f"wrote {path}" + ("" if args.no_replay else f" and {job.replay_path}"), file=sys.stderr)

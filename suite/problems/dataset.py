@@ -19,9 +19,11 @@ import dataclasses
 import hashlib
 import json
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+import pydantic
+from pydantic import Field
 
 from planners.base import PlanningProblem, TaskWaypoint
 from scenes.errors import SuiteError
@@ -176,11 +178,37 @@ def read_manifest(directory: Path) -> dict[str, Any]:
     if not path.exists():
         known = sorted(p.name for p in DATASETS_DIR.iterdir() if (p / MANIFEST_FILE).exists()) if DATASETS_DIR.exists() else []
         raise SuiteError(f"no dataset at {str(directory)!r}; known datasets: {known}")
-    manifest = json.loads(path.read_text())
-    version = manifest.get("format_version")
-    if not isinstance(version, int) or version > FORMAT_VERSION:
-        raise SuiteError(f"{path}: dataset format version {version!r}; this suite reads versions up to {FORMAT_VERSION}")
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, ValueError):
+        raise SuiteError(f"{path} is not a readable dataset manifest") from None
+    if not isinstance(manifest, dict):
+        raise SuiteError(f"{path} is not a readable dataset manifest (a JSON object)")
+    version = manifest.get("format_version", 1)  # datasets written before versions: version 1
+    if isinstance(version, int) and not isinstance(version, bool) and version > FORMAT_VERSION:
+        raise SuiteError(f"{path}: dataset format version {version} is newer than this suite reads (up to version "
+                         f"{FORMAT_VERSION}); update the suite to read it")
+    try:
+        _ManifestIn.model_validate(manifest)
+    except pydantic.ValidationError as exc:
+        err = exc.errors(include_url=False)[0]
+        field = ".".join(str(x) for x in err["loc"])
+        if err["type"] == "missing":
+            raise SuiteError(f"{path}: field '{field}' is missing") from None
+        msg = err["msg"][0].lower() + err["msg"][1:]
+        raise SuiteError(f"{path}: field '{field}' = {err.get('input')!r}: {msg}") from None
     return manifest
+
+
+class _ManifestIn(pydantic.BaseModel):
+    """What this suite reads from a dataset's manifest.json (other fields are kept as they are)."""
+
+    model_config = pydantic.ConfigDict(extra="allow")
+
+    name: Annotated[str, Field(strict=True, min_length=1)] | None = None
+    format_version: Annotated[int, Field(strict=True, ge=1, le=FORMAT_VERSION)] = 1
+    hash: Annotated[str, Field(strict=True, pattern=r"^[0-9a-f]{20}$")]
+    tiers: dict[str, list[Annotated[str, Field(strict=True)]]] = {}
 
 
 def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
@@ -216,12 +244,19 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
         key = rec.get("scene_key")
         if key not in scenes:
             raise SuiteError(f"{directory / PROBLEMS_FILE}: line {lineno} (problem {pid}) names unknown scene {key!r}")
-        if key not in built:
-            built[key] = scene_from_record(scenes[key])
+        try:
+            if key not in built:
+                built[key] = scene_from_record(scenes[key])
+            problem = problem_from_record(rec, built[key], time_limit_s=time_limit_s)
+            ref = np.asarray(rec["reference"]["path"], float)
+        except (KeyError, TypeError, ValueError, StopIteration) as exc:
+            what = f"field {exc.args[0]!r} missing" if isinstance(exc, KeyError) else f"{type(exc).__name__}: {exc}"
+            raise SuiteError(f"{directory / PROBLEMS_FILE}: line {lineno} (problem {pid}) is not a stored problem: "
+                             f"{what}".splitlines()[0]) from None
         ids.append(pid)
-        problems.append(problem_from_record(rec, built[key], time_limit_s=time_limit_s))
+        problems.append(problem)
         meta[pid] = {"problem_id": pid, **{k: rec.get(k) for k in META_FIELDS}}
-        refs[pid] = np.asarray(rec["reference"]["path"], float)
+        refs[pid] = ref
     orders = {key: tuple(sorted(cans, key=lambda c: (cans[c], c))) for key, cans in removed_before.items()}
     return Dataset(name, manifest["hash"], tier, manifest, tuple(ids), tuple(problems), meta, refs, steps, orders)
 

@@ -208,12 +208,26 @@ def _quick_tier(records: list[dict], scene_recs: list[dict], settings: BuildSett
 
 
 def build_dataset(settings: BuildSettings, *, argv: list[str], progress_bar: bool = True) -> dict[str, Any]:
-    """Build and write the dataset; returns its manifest."""
-    from suite.run.runner import git_commit, versions
+    """Build and write the dataset (its directory locked meanwhile); returns its manifest."""
+
+    from suite.run.lock import LOCK_FILE, RunLock
 
     out = dataset_dir(settings.name)
     if (out / MANIFEST_FILE).exists():
         raise SuiteError(f"dataset {settings.name!r} already exists at {out}; choose another --name")
+    with RunLock(out, what="dataset build"):  # one build per dataset directory
+        if (out / MANIFEST_FILE).exists():
+            raise SuiteError(f"dataset {settings.name!r} already exists at {out}; choose another --name")
+        manifest = _build_locked(settings, out, argv=argv, progress_bar=progress_bar)
+        # the dataset now exists (a build that took the lock after us fails on its manifest), and
+        # its directory is committed as data: no lock file left in it
+        (out / LOCK_FILE).unlink(missing_ok=True)
+        return manifest
+
+
+def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar: bool) -> dict[str, Any]:
+    from suite.run.runner import git_commit, versions
+
     t0 = time.perf_counter()
 
     def say(family, made):

@@ -76,6 +76,9 @@ def run_in_sandbox(fn: Callable[[Any], dict], payload: Any, hard_limit_s: float,
         elapsed = time.monotonic() - w.started
         state, value = w.poll(ready)
         if state == "done":
+            if w.retiring:  # the job asked for a fresh process (e.g. after a MemoryError)
+                w.stop()
+                _SANDBOXES.pop(slot, None)
             return None, value, elapsed
         if state == "crash":
             _SANDBOXES.pop(slot, None)
@@ -104,15 +107,23 @@ class DaskExecutor:
         self.init = init
         self.host = host
 
-    def _connect(self):
+    def _connect(self, n_jobs: int):
         try:
             from distributed import Client, LocalCluster
         except ImportError:
             raise SuiteError("--executor dask needs the 'distributed' package; "
                              "install it with: pip install '.[cluster]'") from None
         if self.scheduler is None:
-            cluster = LocalCluster(n_workers=self.n_workers, threads_per_worker=1, processes=True,
-                                   host=self.host, dashboard_address=None, silence_logs=logging.WARNING)
+            from suite.run.executors import cap_workers
+            from suite.run.interrupt import signals_blocked
+
+            # The cluster's processes (and the loop thread that starts them) inherit a mask with
+            # SIGINT/SIGTERM blocked: the terminal's Ctrl-C reaches this process alone, which
+            # closes the cluster.
+            with signals_blocked():
+                cluster = LocalCluster(n_workers=cap_workers(self.n_workers, n_jobs), threads_per_worker=1,
+                                       processes=True, host=self.host, dashboard_address=None,
+                                       silence_logs=logging.WARNING)
             return Client(cluster), cluster
         try:
             return Client(self.scheduler, timeout=30), None
@@ -126,7 +137,7 @@ class DaskExecutor:
         from distributed import wait
         from distributed.client import FutureCancelledError
 
-        client, cluster = self._connect()
+        client, cluster = self._connect(len(jobs))
         run_id = uuid.uuid4().hex[:8]
         pending = {}
         try:

@@ -43,29 +43,61 @@ class Outcome:
     wall_time_s: float = 0.0
 
 
+_RETIRE = False
+
+
+def retire_worker() -> None:
+    """Called by a job in a worker process: end this worker after its answer (e.g. after a
+    MemoryError, whose process may be left in a bad state); the pool starts a fresh one."""
+    global _RETIRE
+    _RETIRE = True
+
+
+def cap_workers(requested: int, pending: int) -> int:
+    """The worker count for `pending` jobs: never more workers than jobs (said in a log line)."""
+    n = max(1, min(requested, pending))
+    if n < requested:
+        log.info("starting %d worker(s), not %d: only %d trial(s) pending", n, requested, pending)
+    return n
+
+
 def _worker_main(conn, init: Callable[[], None] | None) -> None:
+    from suite.run.interrupt import ignore_signals
+
+    ignore_signals()  # the parent stops workers; the terminal's Ctrl-C is for the parent alone
     if init is not None:
         init()
     while True:
         try:
             item = conn.recv()
-        except EOFError:
+        except (EOFError, OSError):  # the parent has gone
             return
         if item is None:
             return
         fn, payload = item
-        conn.send(fn(payload))
+        result = fn(payload)
+        try:
+            conn.send((result, _RETIRE))
+        except OSError:  # the parent has gone while the job ran: nothing to report to
+            return
+        if _RETIRE:
+            return
 
 
 class _Worker:
     def __init__(self, ctx, init):
+        from suite.run.interrupt import signals_blocked
+
         self.conn, child = ctx.Pipe()
         self.proc = ctx.Process(target=_worker_main, args=(child, init), daemon=True)
-        self.proc.start()
+        with signals_blocked():  # the child starts with SIGINT/SIGTERM blocked (inherited mask)
+            self.proc.start()
         child.close()
         self.job: Job | None = None
         self.group: str | None = None
         self.started = 0.0
+        #: the worker asked to be replaced after its last answer (see `retire_worker`)
+        self.retiring = False
 
     def submit(self, job: Job) -> None:
         self.job, self.group, self.started = job, job.group, time.monotonic()
@@ -80,7 +112,7 @@ class _Worker:
         """
         if self.conn in ready:
             try:
-                result = self.conn.recv()
+                result, self.retiring = self.conn.recv()
             except (EOFError, OSError):
                 result = None
             if result is not None:
@@ -126,18 +158,25 @@ class LocalExecutor:
         self._ctx = mp.get_context("spawn")
         self._workers: list[_Worker] = []
 
-    def start(self) -> None:
-        """Spawn the workers now (they import and initialise while the caller prepares work)."""
+    def start(self, n: int | None = None) -> None:
+        """Spawn the workers now (they import and initialise while the caller prepares work);
+        `run` stops those beyond the number of jobs it is given."""
         # One thread per worker: the pool is the parallelism; BLAS/OpenMP thread pools in every
         # worker would only contend for the same cores. Children inherit this environment.
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ.setdefault(var, "1")
-        while len(self._workers) < self.jobs:
+        while len(self._workers) < (self.jobs if n is None else n):
             self._workers.append(_Worker(self._ctx, self.init))
 
     def close(self) -> None:
         for w in self._workers:
             w.stop()
+        self._workers = []
+
+    def abort(self) -> None:
+        """Kill every worker now (an interrupted or failed run: the jobs in flight are dropped)."""
+        for w in self._workers:
+            w.kill()
         self._workers = []
 
     @staticmethod
@@ -161,12 +200,22 @@ class LocalExecutor:
     def run(self, jobs: list[Job]) -> Iterator[Outcome]:
         """Run the jobs; yield each outcome as it completes. The workers stop at the end."""
         queue = deque(jobs)
-        self.start()
+        if not jobs:
+            self.close()
+            return
+        n = cap_workers(self.jobs, len(jobs))
+        for extra in self._workers[n:]:  # started early, before the jobs were known; never used
+            extra.kill()
+        del self._workers[n:]
+        self.start(n)
         workers = self._workers
         try:
             while queue or any(w.job is not None for w in workers):
-                for w in workers:
+                for i, w in enumerate(workers):
                     if w.job is None and queue:
+                        if not w.proc.is_alive():  # died between jobs: replace it, blame no job
+                            w.kill()
+                            w = workers[i] = _Worker(self._ctx, self.init)
                         w.submit(self._pick(queue, w, workers))
                 busy = [w for w in workers if w.job is not None]
                 now = time.monotonic()
@@ -179,6 +228,9 @@ class LocalExecutor:
                     job, elapsed = w.job, time.monotonic() - w.started
                     state, value = w.poll(ready)
                     if state == "done":
+                        if w.retiring:
+                            w.stop()
+                            workers[i] = _Worker(self._ctx, self.init)
                         yield Outcome(job, value, None, "", elapsed)
                         continue
                     if state == "crash":
@@ -189,6 +241,9 @@ class LocalExecutor:
                         workers[i] = _Worker(self._ctx, self.init)
                         yield Outcome(job, None, "killed_timeout",
                                       f"killed after {elapsed:.1f} s (hard limit {job.hard_limit_s:.1f} s)", elapsed)
+        except BaseException:  # interrupted, or the caller stopped (GeneratorExit): no waiting
+            self.abort()
+            raise
         finally:
             self.close()
 

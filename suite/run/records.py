@@ -17,6 +17,7 @@ import numpy as np
 
 from planners.base import PlanStatus
 from scenes.errors import SuiteError
+from suite.run.formats import MANIFEST_FORMAT_VERSION, RECORD_FORMAT_VERSION, check_version
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +80,7 @@ def read_trials(path: str | Path) -> list[dict[str, Any]]:
         missing = [f for f in REQUIRED_FIELDS if f not in rec]
         if missing:
             raise SuiteError(f"{path} line {i + 1} lacks the field(s) {', '.join(missing)}")
+        check_version(rec, supported=RECORD_FORMAT_VERSION, what="trial record", where=f"{path} line {i + 1}")
         records.append(rec)
     return records
 
@@ -87,10 +89,13 @@ def read_manifest(run_dir: str | Path) -> dict[str, Any]:
     """The run's manifest.json as a dict, or an empty dict if there is none (or it is unreadable)."""
     path = Path(run_dir) / MANIFEST_FILE
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        manifest = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, json.JSONDecodeError) as exc:
         log.debug("no usable manifest at %s: %s", path, exc)
         return {}
+    if isinstance(manifest, dict):  # a newer manifest format is an error, an older one is read
+        check_version(manifest, supported=MANIFEST_FORMAT_VERSION, what="run manifest", where=str(path))
+    return manifest
 
 
 # --- typed access ---------------------------------------------------------------------------------

@@ -32,6 +32,10 @@ HARD_LIMIT_GRACE_S = 30.0
 HARD_LIMIT_FACTOR = 3.0
 #: What `compare` runs by default: the frozen benchmark's quick tier.
 DEFAULT_DATASET = "recycle-v1:quick"
+#: Address-space cap of a worker process (MiB). Drake maps much virtual memory it never touches:
+#: a worker that ran 60 trials of ik, rrt and trajopt peaked at 0.63 GiB (VmPeak), so 8 GiB
+#: stops only a runaway planner.
+DEFAULT_MEMORY_LIMIT_MB = 8192
 
 
 @dataclasses.dataclass(frozen=True)
@@ -58,15 +62,22 @@ class CompareConfig:
     #: a frozen dataset `NAME[:TIER]` to run instead of generated scenes (None: generate them from
     #: variant, seed, scenes, cans and grasps)
     dataset: str | None = DEFAULT_DATASET
+    #: each worker process's address-space cap, MiB (a trial beyond it: `crash`, `out_of_memory`)
+    memory_limit_mb: Annotated[int, Field(ge=256, strict=True)] = DEFAULT_MEMORY_LIMIT_MB
 
 
 def worker_init() -> None:
     """Runs once in each worker process: quiet logs, OMPL's process-global seed set once, and the
     built-in planners imported up front (while the parent is still preparing problems)."""
     import importlib
+    import multiprocessing
 
     from planners.registry import BUILTIN
 
+    if multiprocessing.parent_process() is not None:  # a worker: the parent alone handles Ctrl-C
+        from suite.run.interrupt import ignore_signals
+
+        ignore_signals()
     logging.basicConfig(level=logging.WARNING)
     for target in sorted(set(BUILTIN.values())):
         try:
@@ -80,6 +91,21 @@ def worker_init() -> None:
         ou.setLogLevel(ou.LOG_WARN)
     except Exception:  # OMPL missing or already seeded: the trial-level seeding still holds
         pass
+
+
+@dataclasses.dataclass(frozen=True)
+class WorkerInit:
+    """A worker's start-up (picklable, and equal by value so a Dask worker keeps one sandbox per
+    setting): the memory cap, then `worker_init`."""
+
+    memory_limit_mb: int | None = DEFAULT_MEMORY_LIMIT_MB
+
+    def __call__(self) -> None:
+        if self.memory_limit_mb:
+            from suite.run.trial import limit_memory
+
+            limit_memory(self.memory_limit_mb)
+        worker_init()
 
 
 def scene_grasps(scene, *, grasps: str):
@@ -147,8 +173,11 @@ def _generated_problems(config: CompareConfig, progress):
 
 def failure_record(spec: TrialSpec, status: str, message: str, wall_time_s: float) -> dict[str, Any]:
     """The record of a trial whose worker crashed or was killed."""
+    from suite.run.formats import RECORD_FORMAT_VERSION
+
     p = spec.problem
     return {
+        "format_version": RECORD_FORMAT_VERSION,
         "trial_id": spec.trial_id, "planner": spec.planner, "planner_config": spec.planner_config,
         "scene_seed": p.scene.seed, "scene_key": p.scene.key(), "variant": p.scene.variant,
         "can_id": p.can_id, "problem": p.kind, "held": p.held is not None, "seed": p.seed,
@@ -160,8 +189,17 @@ def failure_record(spec: TrialSpec, status: str, message: str, wall_time_s: floa
     }
 
 
+NEWLINE = b"\n"
+
+
 def recorded_trial_ids(path: Path) -> set[str]:
-    """Ids of the trials already in a trials.jsonl; a torn last line is cut off the file."""
+    """Ids of the trials already in a trials.jsonl; a torn last line is cut off the file.
+
+    Raises:
+        SuiteError: a line is not a trial record, or was written by a newer record format.
+    """
+    from suite.run.formats import RECORD_FORMAT_VERSION, check_version
+
     if not path.exists():
         return set()
     data = path.read_bytes()
@@ -173,10 +211,12 @@ def recorded_trial_ids(path: Path) -> set[str]:
         if not line.endswith(b"\n"):
             break  # torn: the run was killed while writing it
         try:
-            ids.add(json.loads(line)["trial_id"])
-        except (ValueError, KeyError):
-            lineno = data[:pos].count(b"\n")
-            raise SuiteError(f"{path}: line {lineno} is not a trial record") from None
+            rec = json.loads(line)
+            ids.add(rec["trial_id"])
+        except (ValueError, KeyError, TypeError):
+            raise SuiteError(f"{path}: line {data[:pos].count(NEWLINE)} is not a trial record") from None
+        check_version(rec, supported=RECORD_FORMAT_VERSION, what="trial record",
+                      where=f"{path} line {data[:pos].count(NEWLINE)}")
         good_end = pos
     if good_end < len(data):
         log.warning("%s: dropping a torn last line (%d bytes)", path, len(data) - good_end)
@@ -215,28 +255,90 @@ def write_manifest(out: Path, config: CompareConfig, *, argv: list[str]) -> None
 
         name, tier = parse_dataset_arg(config.dataset)
         dataset = {"name": name, "tier": tier, "hash": read_manifest(dataset_dir(name))["hash"]}
+    from suite.run.formats import MANIFEST_FORMAT_VERSION
+
     manifest = {
+        "format_version": MANIFEST_FORMAT_VERSION,
+        "status": "running",
         "command": " ".join(["python -m suite"] + argv),
         "config": dataclasses.asdict(config),
         "dataset": dataset,
         "versions": versions(),
         "git_commit": git_commit(),
         "machine": {**cpu_description(), "platform": platform.platform()},
-        "started_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "started_utc": _now(),
     }
-    (out / MANIFEST_FILE).write_text(json.dumps(manifest, indent=2) + "\n")
+    _write_json_atomically(out / MANIFEST_FILE, manifest)
 
 
-def make_executor(executor: str, *, jobs: int, scheduler: str | None = None):
-    """The executor named on the command line ("local" or "dask")."""
+def _now() -> str:
+    return dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def _write_json_atomically(path: Path, data: dict[str, Any]) -> None:
+    """Write a JSON file beside itself, then rename it over the old one (readers never see half)."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        tmp.write_text(json.dumps(data, indent=2) + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def read_run_manifest(out: Path) -> dict[str, Any] | None:
+    """A run's manifest.json (None if it has none).
+
+    Raises:
+        SuiteError: it does not parse, or was written by a newer manifest format.
+    """
+    from suite.run.formats import MANIFEST_FORMAT_VERSION, check_version
+
+    path = out / MANIFEST_FILE
+    try:
+        manifest = json.loads(path.read_text())
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError):
+        raise SuiteError(f"{path} is not a readable run manifest") from None
+    if not isinstance(manifest, dict):
+        raise SuiteError(f"{path} is not a readable run manifest")
+    check_version(manifest, supported=MANIFEST_FORMAT_VERSION, what="run manifest", where=str(path))
+    return manifest
+
+
+def update_manifest(out: Path, **fields: Any) -> bool:
+    """Set fields of a run's manifest (status, counts); best effort, False if it could not.
+
+    A run stopped by a full disk may not be able to say so in its manifest: the error line it
+    prints is what counts, and the records on disk are the truth.
+    """
+    try:
+        manifest = read_run_manifest(out)
+        if manifest is None:
+            return False
+        manifest.update(fields)
+        manifest.setdefault("format_version", 1)
+        _write_json_atomically(out / MANIFEST_FILE, manifest)
+        return True
+    except (OSError, SuiteError) as exc:
+        log.warning("could not update %s: %s", out / MANIFEST_FILE, exc)
+        return False
+
+
+def make_executor(executor: str, *, jobs: int, scheduler: str | None = None,
+                  memory_limit_mb: int | None = DEFAULT_MEMORY_LIMIT_MB):
+    """The executor named on the command line ("local" or "dask"); its workers cap their memory
+    at `memory_limit_mb` MiB (None: no cap)."""
     from suite.run.executors import LocalExecutor
 
+    init = WorkerInit(memory_limit_mb)
     if executor == "local":
-        return LocalExecutor(jobs=jobs, init=worker_init)
+        return LocalExecutor(jobs=jobs, init=init)
     if executor == "dask":
         from suite.run.dask_executor import DaskExecutor
 
-        return DaskExecutor(scheduler=scheduler, n_workers=jobs, init=worker_init)
+        return DaskExecutor(scheduler=scheduler, n_workers=jobs, init=init)
     raise SuiteError(f"unknown executor {executor!r}; allowed: local, dask")
 
 
@@ -253,13 +355,18 @@ def run_trials(trials: list[TrialSpec], *, out: Path, jobs: int, executor="local
     """
     from tqdm import tqdm
 
-    from suite.run.executors import Job
+    from suite.run.executors import Job, cap_workers
+    from suite.run.interrupt import critical
+    from suite.run.journal import TrialsJournal
 
     path = out / TRIALS_FILE
     done = recorded_trial_ids(path)
     todo = [t for t in trials if t.trial_id not in done]
     by_key = {t.trial_id: t for t in todo}
-    ex = make_executor(executor, jobs=jobs, scheduler=scheduler) if isinstance(executor, str) else executor
+    if isinstance(executor, str):
+        ex = make_executor(executor, jobs=cap_workers(jobs, len(todo)), scheduler=scheduler)
+    else:
+        ex = executor
     # Trials of one scene go to the same worker where possible: its cached worlds serve them all.
     # The usually long ones (transit and return, where the arm crosses the workspace) go first, so
     # that the last trials of a run are short ones and no worker idles long at the end.
@@ -268,15 +375,23 @@ def run_trials(trials: list[TrialSpec], *, out: Path, jobs: int, executor="local
                  group=t.problem.scene.key()) for t in todo_ordered]
     bar = tqdm(total=len(trials), initial=len(trials) - len(todo), desc="trials", unit="trial",
                disable=not progress_bar, file=sys.stderr, dynamic_ncols=True)
-    with open(path, "a") as f:
-        for outcome in ex.run(jobs_):
-            spec = by_key[outcome.job.key]
-            record = outcome.result if outcome.failure is None else failure_record(
-                spec, outcome.failure, outcome.message, outcome.wall_time_s)
-            f.write(json.dumps(record) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-            bar.set_postfix_str(f"{spec.planner} {spec.problem.kind}: {record['status']}", refresh=False)
-            bar.update(1)
-    bar.close()
-    return {"total": len(trials), "skipped": len(trials) - len(todo), "ran": len(todo)}
+    written: set[str] = set()
+    outcomes = ex.run(jobs_)
+    try:
+        with TrialsJournal(path) as journal:
+            for outcome in outcomes:
+                spec = by_key.get(outcome.job.key)
+                if spec is None or spec.trial_id in written:  # never write a trial twice
+                    log.warning("ignoring a second outcome of trial %s", outcome.job.key)
+                    continue
+                record = outcome.result if outcome.failure is None else failure_record(
+                    spec, outcome.failure, outcome.message, outcome.wall_time_s)
+                with critical():  # a signal now waits until the line is whole and on disk
+                    journal.append(record)
+                written.add(spec.trial_id)
+                bar.set_postfix_str(f"{spec.planner} {spec.problem.kind}: {record['status']}", refresh=False)
+                bar.update(1)
+    finally:
+        outcomes.close()  # an error or signal stops the workers at once (in-flight trials are rerun on resume)
+        bar.close()
+    return {"total": len(trials), "skipped": len(trials) - len(todo), "ran": len(written)}

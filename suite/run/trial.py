@@ -21,6 +21,23 @@ from suite.scoring.validate import validate_path
 
 log = logging.getLogger(__name__)
 
+#: The memory cap of this worker process (MiB), once `limit_memory` has set it.
+_MEMORY_LIMIT_MB: int | None = None
+
+
+def limit_memory(limit_mb: int) -> None:
+    """Cap this process's address space (RLIMIT_AS) at `limit_mb` MiB: a runaway allocation then
+    raises MemoryError (recorded as a `crash` with reason `out_of_memory`) instead of swapping
+    the machine. Never above the hard limit the process already has."""
+    import resource
+
+    global _MEMORY_LIMIT_MB
+    _soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    want = int(limit_mb) * 1024 * 1024
+    if hard != resource.RLIM_INFINITY:
+        want = min(want, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (want, hard))
+    _MEMORY_LIMIT_MB = want // (1024 * 1024)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,13 +115,13 @@ def run_problem(problem: PlanningProblem, *, planner: str, planner_config: dict[
     return run_trial(make_trial(problem, planner=planner, planner_config=planner_config, run_seed=run_seed))
 
 
-def run_trial(spec: TrialSpec) -> dict[str, Any]:
-    """Plan, validate, time and score one trial; never raises for a planner's failure."""
-    from planners.registry import planner_class
-    from planners.worlds import collision_world
+def trial_record(spec: TrialSpec) -> dict[str, Any]:
+    """The fields of a trial's record that describe what was asked (before any planning)."""
+    from suite.run.formats import RECORD_FORMAT_VERSION
 
     problem = spec.problem
-    record: dict[str, Any] = {
+    return {
+        "format_version": RECORD_FORMAT_VERSION,
         "trial_id": spec.trial_id,
         "planner": spec.planner,
         "planner_config": spec.planner_config,
@@ -120,6 +137,34 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
         "q_goal": _list(problem.q_goal),
         **spec.meta,
     }
+
+
+def run_trial(spec: TrialSpec) -> dict[str, Any]:
+    """Plan, validate, time and score one trial; never raises for a planner's failure.
+
+    A MemoryError anywhere in the trial (the worker's memory cap, see `limit_memory`) gives a
+    `crash` record with `stats.reason = "out_of_memory"`, and the worker asks to be replaced.
+    """
+    t0 = time.perf_counter()
+    try:
+        return _run_trial(spec)
+    except MemoryError as exc:
+        from suite.run.executors import retire_worker
+
+        retire_worker()  # a process that ran out of memory may be left in a bad state
+        record = trial_record(spec)
+        record.update(status=PlanStatus.CRASH.value, planning_time_s=time.perf_counter() - t0, path=None,
+                      metrics={}, stats={"reason": "out_of_memory", "error": f"MemoryError: {exc}"[:200],
+                                         "memory_limit_mb": _MEMORY_LIMIT_MB})
+        return record
+
+
+def _run_trial(spec: TrialSpec) -> dict[str, Any]:
+    from planners.registry import planner_class
+    from planners.worlds import collision_world
+
+    problem = spec.problem
+    record = trial_record(spec)
     t_setup = time.perf_counter()
     world = collision_world(problem)
     result = None
@@ -128,6 +173,8 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
         planner = cls(make_config(cls, spec.planner_config))
         if hasattr(planner, "prepare"):  # world-only set-up, outside the clock for every planner alike
             planner.prepare(problem)
+    except MemoryError:
+        raise
     except Exception as exc:  # a bad config or a planner bug is this trial's error, not the run's
         result = _error_result(spec, exc)
     record["setup_time_s"] = time.perf_counter() - t_setup
@@ -135,12 +182,36 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
     if result is None:
         try:
             result = planner.plan(problem)
+        except MemoryError:
+            raise
         except Exception as exc:
             result = _error_result(spec, exc)
     planning_time_s = time.perf_counter() - t0
+    return judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s)
+
+
+def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: PlanResult,
+                 planning_time_s: float) -> dict[str, Any]:
+    """Complete a trial record from a planner's result: a claimed solution is validated, timed
+    with TOPP-RA and scored, identically for the suite's planners and imported external ones.
+
+    The path is judged as it is stored (rounded to 1e-10 rad), so that a stored path re-scored
+    or re-imported gives exactly the record's metrics.
+
+    Args:
+        record: the trial's record so far (`trial_record`); updated in place.
+        spec: the trial (its problem and the reference figures in its meta).
+        world: the problem's python-fcl collision world.
+        result: what the planner returned (SUCCESS with a path is a claimed solution).
+        planning_time_s: the planner's wall time, s.
+
+    Returns:
+        The record, with status, planning_time_s, path, metrics and stats.
+    """
+    problem = spec.problem
     status = PlanStatus(result.status)
     stats = dict(result.stats)
-    path = None if result.path is None else np.asarray(result.path, float)
+    path = None if result.path is None else np.asarray(result.path, float).round(10)
     metrics: dict[str, float] = {}
     if status == PlanStatus.SUCCESS:
         reason = validate_path(problem, path, world)
@@ -163,7 +234,7 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
         status=status.value,
         planning_time_s=planning_time_s,
         path=None if path is None or status not in (PlanStatus.SUCCESS, PlanStatus.TIMING_FAILED)
-        else path.round(10).tolist(),
+        else path.tolist(),
         metrics=metrics,
         stats=_jsonable(stats),
     )

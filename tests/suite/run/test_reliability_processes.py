@@ -1,0 +1,159 @@
+"""Reliability with real second processes: two runs into one directory, Ctrl-C and SIGTERM.
+
+The runs use the `sleepy` fixture planner (0.3 s per trial, no solution) on generated `open`
+scenes, so that they are slow enough to interrupt and fast to finish.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[3]
+FAULTY = ROOT / "tests" / "fixtures" / "faulty"
+SLEEPY = ["--planners", "sleepy", "--variant", "open", "--cans", "1", "--jobs", "1", "--no-plots", "--no-progress"]
+
+
+def _env():
+    return dict(os.environ, PYTHONPATH=os.pathsep.join([str(FAULTY), str(ROOT)]))
+
+
+def _start(args, **kw):
+    return subprocess.Popen([sys.executable, "-m", "suite", "compare", *args], cwd=ROOT, env=_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True, **kw)
+
+
+def _lines(out: Path) -> list[dict]:
+    path = out / "trials.jsonl"
+    return [json.loads(line) for line in path.read_text().splitlines()] if path.exists() else []
+
+
+def _wait_for_records(out: Path, n: int, proc, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while len(_lines(out)) < n:
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "no records written"
+        time.sleep(0.05)
+
+
+def _group_gone(pgid: int, timeout_s: float = 5.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_two_runs_started_at_once_into_one_directory(tmp_path):
+    out = tmp_path / "same"
+    procs = [_start([*SLEEPY, "--scenes", "1", "--out", str(out)]) for _ in range(2)]
+    results = [(p.wait(timeout=120), *p.communicate()) for p in procs]
+    codes = sorted(r[0] for r in results)
+    assert codes == [0, 2], results
+    loser = next(r for r in results if r[0] == 2)
+    errors = [line for line in loser[2].splitlines() if line.strip()]
+    winner_pid = next(p.pid for p, r in zip(procs, results) if r[0] == 0)
+    assert errors == [(f"error: '{out}' is in use by another run (PID {winner_pid}); wait for it to end, "
+                       "or use another directory")]
+    ids = [r["trial_id"] for r in _lines(out)]
+    assert len(ids) == len(set(ids)) == 5  # every trial once: nothing doubled
+
+
+def test_interrupt_terminate_and_resume_lose_and_double_nothing(tmp_path):
+    out = tmp_path / "run"
+    proc = _start([*SLEEPY, "--scenes", "2", "--out", str(out)])
+    _wait_for_records(out, 1, proc)
+    os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does: the whole process group
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    kept = len(_lines(out))
+    resume = f"python -m suite compare --resume --out {out}"
+    assert err.strip().splitlines()[-1] == (f"interrupted by SIGINT: {kept} trial(s) recorded in {out} are kept; "
+                                            f"resume with: {resume}")
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["status"] == "interrupted" and manifest["interrupted_by"] == "SIGINT"
+    total = manifest["trials_total"]  # 2 scenes x 5 problems, identical ones planned once
+    assert manifest["trials_recorded"] == kept and total >= kept + 2
+    assert _group_gone(proc.pid), "worker processes outlived the run"
+
+    # the printed command resumes; SIGTERM (e.g. from a batch scheduler) to the parent stops it again
+    proc = _start(shlex.split(resume)[4:])
+    _wait_for_records(out, kept + 1, proc)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143 and "Traceback" not in err, err
+    assert "interrupted by SIGTERM" in err.strip().splitlines()[-1]
+    assert json.loads((out / "manifest.json").read_text())["interrupted_by"] == "SIGTERM"
+    assert _group_gone(proc.pid)
+
+    proc = _start(shlex.split(resume)[4:])
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    assert _group_gone(proc.pid), "worker processes outlived a completed run"
+    ids = [r["trial_id"] for r in _lines(out)]
+    assert len(ids) == len(set(ids)) == total  # trials lost 0, doubled 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["status"] == "complete" and manifest["trials_recorded"] == total
+
+
+def test_second_ctrl_c_ends_at_once(tmp_path):
+    out = tmp_path / "twice"
+    proc = _start([*SLEEPY, "--scenes", "2", "--out", str(out)])
+    _wait_for_records(out, 1, proc)
+    os.killpg(proc.pid, signal.SIGINT)
+    os.killpg(proc.pid, signal.SIGINT)
+    t0 = time.monotonic()
+    _, err = proc.communicate(timeout=30)
+    assert time.monotonic() - t0 < 5.0
+    assert proc.returncode == 130 and "Traceback" not in err, err
+    assert _group_gone(proc.pid)
+    ids = [r["trial_id"] for r in _lines(out)]  # whatever was recorded is whole
+    assert len(ids) == len(set(ids)) >= 1
+
+
+def test_interrupted_dataset_build_writes_nothing(tmp_path):
+    target = tmp_path / "ds"
+    proc = subprocess.Popen([sys.executable, "-m", "suite", "dataset", "build", "--name", str(target), "--variants",
+                             "wall", "--scenes", "2", "--cans", "2", "--reference-time-s", "1", "--jobs", "1",
+                             "--no-progress"], cwd=ROOT, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while not (target / ".lock").exists():  # the build has started (its directory is locked)
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    time.sleep(1.0)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and "Traceback" not in err, err
+    assert err.strip().splitlines()[-1] == ("interrupted by SIGINT: nothing written (a dataset is written only when "
+                                            "complete); run the same command again to build it")
+    assert not (target / "manifest.json").exists()
+    assert _group_gone(proc.pid)
+
+
+def test_interrupted_execute_writes_nothing(tmp_path):
+    out = tmp_path / "exec"
+    proc = subprocess.Popen([sys.executable, "-m", "suite", "execute", "--planner", "rrt", "--variant", "open",
+                             "--cans", "1", "--seed", "1", "--no-replay", "--out", str(out)], cwd=ROOT, env=_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while not out.exists():  # arguments checked, the output directory made: planning starts
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    time.sleep(1.0)
+    os.killpg(proc.pid, signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143 and "Traceback" not in err, err
+    assert err.strip().splitlines()[-1] == f"interrupted by SIGTERM: nothing written to {out}"
+    assert not (out / "execution.json").exists()
+    assert _group_gone(proc.pid)
