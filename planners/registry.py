@@ -22,6 +22,7 @@ BUILTIN = {
     "aorrtc": "planners.ompl_rrt:AORRTCPlanner",
     "prm": "planners.ompl_rrt:PRMPlanner",
     "trajopt": "planners.trajopt:TrajoptPlanner",
+    "gcs": "planners.gcs:GcsPlanner",
 }
 ENTRY_POINT_GROUP = "suite.planners"
 

@@ -27,6 +27,7 @@ COMMANDS = {
     "rescore": ("suite.cli.rescore", "recompute every metric of a run from its stored paths, then redraw its report"),
     "export": ("suite.cli.export", "write a dataset's problems as files any planner can read (problems, schema, URDFs)"),
     "import": ("suite.cli.import_", "judge an external planner's paths like a suite trial and add them as records"),
+    "regions": ("suite.cli.regions", "build gcs's collision-free convex regions of a dataset's worlds ahead (cached)"),
     "bench": ("suite.cli.bench", "print speed figures (collision, perception, planners)"),
 }
 

@@ -1,0 +1,277 @@
+"""`gcs`: motion planning with graphs of convex sets (Drake's GcsTrajectoryOptimization).
+
+Marcucci et al., "Motion planning around obstacles with convex optimization" (Science Robotics
+2023). The configuration space is covered by collision-free convex regions (sampled IRIS, see
+`planners.gcs_regions`), built offline once per collision world and cached on disk; `prepare`
+loads them (or builds them on a miss) before the trial's clock starts, and their build time is
+reported as `stats.offline_s`, never as planning time.
+
+Online, one Bezier curve per visited region (order 1 by default: straight segments, so the cost
+is exactly the joint-space path length), start and goal as point regions of order 0, joined
+where regions intersect; the shortest path is found by the convex relaxation of the
+mixed-integer program followed by randomized rounding and a convex restriction on each rounded
+path, solved by Clarabel (ships with Drake). The time-free path is the curve sampled densely;
+the suite times it with TOPP-RA. Sampled IRIS regions are not certified collision-free: the path
+is checked with the python-fcl world at the validator's resolution, and where it collides that
+configuration is cut off (in-memory copies of) the regions holding it and GCS is solved again
+(`max_repairs`, planning time); a path still colliding is NO_SOLUTION. With `max_repairs=0` the
+path is returned unchecked and the suite's validator judges it (a collision is
+`invalid_solution`), as it judges every planner's path anyway.
+
+Building regions inside a `compare` trial counts against the trial's hard limit (3 x budget +
+30 s): build them ahead with `python -m suite regions build --dataset NAME`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from typing import ClassVar
+
+import numpy as np
+
+from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.gcs_regions import (
+    RegionOptions,
+    RegionSet,
+    cut_regions,
+    problem_hash,
+    regions_for,
+)
+from planners.worlds import collision_world, remember
+from scenes.errors import SuiteError
+
+log = logging.getLogger(__name__)
+
+SOLVERS = ("clarabel", "scs")
+
+
+@dataclasses.dataclass(frozen=True)
+class GcsConfig(RegionOptions):
+    """Settings of `gcs`: the region options (see `planners.gcs_regions.RegionOptions`) and:
+
+    Attributes:
+        order: Bezier order per region (1: straight segments, the shortest path).
+        max_rounded_paths: paths drawn by randomized rounding of the relaxation.
+        solver: "clarabel" or "scs" (convex solvers that ship with Drake).
+        sample_step_rad: largest joint-space L2 step between returned waypoints inside a curved
+            segment (order > 1); straight segments return their ends.
+        max_repairs: online repairs: the path is checked with the python-fcl world at
+            `check_resolution_rad` (as the validator checks it); where it collides, the colliding
+            configuration is cut off the regions holding it and GCS is solved again (planning
+            time, in-memory copies only). 0 returns the first rounded path unchecked.
+        check_resolution_rad: joint resolution of that check (rad).
+        regions_dir: the region cache read first and written by on-demand builds; "" for
+            `results/regions/` (datasets' `regions/` directories are read too).
+        build_regions: build missing regions in `prepare` (offline); otherwise a world without
+            cached regions is NO_SOLUTION.
+    """
+
+    order: int = 1
+    max_rounded_paths: int = 5
+    solver: str = "clarabel"
+    sample_step_rad: float = 0.02
+    max_repairs: int = 5
+    check_resolution_rad: float = 0.01
+    regions_dir: str = ""
+    build_regions: bool = True
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.order < 1:
+            raise SuiteError(f"gcs order={self.order!r} must be >= 1")
+        if self.max_rounded_paths < 1:
+            raise SuiteError(f"gcs max_rounded_paths={self.max_rounded_paths!r} must be >= 1")
+        if self.solver not in SOLVERS:
+            raise SuiteError(f"gcs solver={self.solver!r}; allowed: {', '.join(SOLVERS)}")
+        if not self.sample_step_rad > 0:
+            raise SuiteError(f"gcs sample_step_rad={self.sample_step_rad!r} must be positive")
+
+    def region_options(self) -> RegionOptions:
+        names = {f.name for f in dataclasses.fields(RegionOptions)}
+        return RegionOptions(**{k: v for k, v in dataclasses.asdict(self).items() if k in names})
+
+
+def _solver(name: str):
+    from pydrake.solvers import ClarabelSolver, ScsSolver
+
+    return {"clarabel": ClarabelSolver, "scs": ScsSolver}[name]()
+
+
+def sample_trajectory(traj, *, order: int, step_rad: float) -> np.ndarray:
+    """Waypoints (N, 7) of a composite Bezier trajectory: segment ends for straight segments,
+    samples at most about `step_rad` apart on curved ones; repeated points dropped."""
+    points = []
+    for i in range(traj.get_number_of_segments()):
+        seg = traj.segment(i)
+        t0, t1 = seg.start_time(), seg.end_time()
+        a, b = seg.value(t0).ravel(), seg.value(t1).ravel()
+        if order <= 1 or np.allclose(a, b):
+            ts = [t0, t1]
+        else:
+            coarse = np.array([seg.value(t).ravel() for t in np.linspace(t0, t1, 9)])
+            length = np.linalg.norm(np.diff(coarse, axis=0), axis=1).sum()
+            ts = np.linspace(t0, t1, max(2, int(np.ceil(length / step_rad)) + 1))
+        points += [seg.value(t).ravel() for t in ts]
+    out = [points[0]]
+    for p in points[1:]:
+        if np.linalg.norm(p - out[-1]) > 1e-9:
+            out.append(p)
+    return np.array(out)
+
+
+def solve_gcs(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.ndarray, *, order: int = 1,
+              max_rounded_paths: int = 5, solver: str = "clarabel", seed: int = 0):
+    """One GCS shortest-path solve (convex relaxation, rounding, restriction) through the regions
+    {A_i q <= b_i} joined by `edges`, from the point q_start to the point q_goal.
+
+    Returns:
+        (trajectory, MathematicalProgramResult).
+    """
+    from pydrake.geometry.optimization import (
+        GraphOfConvexSetsOptions,
+        HPolyhedron,
+        Point,
+    )
+    from pydrake.planning import GcsTrajectoryOptimization
+
+    gcs = GcsTrajectoryOptimization(len(q_start))
+    main = gcs.AddRegions([HPolyhedron(Ai, bi) for Ai, bi in zip(A, b)], edges, order, name="regions")
+    source = gcs.AddRegions([Point(q_start)], 0, name="start")
+    target = gcs.AddRegions([Point(q_goal)], 0, name="goal")
+    gcs.AddEdges(source, main)
+    gcs.AddEdges(main, target)
+    gcs.AddPathLengthCost(1.0)
+    options = GraphOfConvexSetsOptions()
+    options.convex_relaxation = True
+    options.preprocessing = True
+    options.max_rounded_paths = max_rounded_paths
+    options.rounding_seed = int(seed) % (2**31)
+    options.solver = _solver(solver)
+    drake_log = logging.getLogger("drake")
+    level = drake_log.level
+    drake_log.setLevel(logging.WARNING)  # Drake logs every solve and rounding at INFO
+    try:
+        return gcs.SolvePath(source, target, options)
+    finally:
+        drake_log.setLevel(level)
+
+
+def checked_path(A: list, b: list, edges: list, seeds: list, q_start: np.ndarray, q_goal: np.ndarray, *, world,
+                 order: int = 1, max_rounded_paths: int = 5, solver: str = "clarabel", seed: int = 0,
+                 max_repairs: int = 5, check_resolution_rad: float = 0.01, sample_step_rad: float = 0.02,
+                 deadline: float = float("inf")) -> tuple[np.ndarray | None, dict]:
+    """Solve, check the path with the python-fcl world as the validator does, and where it collides
+    cut the colliding configuration off the regions holding it (A, b, edges are changed in place)
+    and solve again, up to `max_repairs` times or the deadline (time.perf_counter()).
+
+    Returns:
+        (path (N, 7) or None, stats: solver_status, cost, repairs, cuts, reason when None).
+    """
+    lower, upper = world.robot.lower_rad, world.robot.upper_rad
+    stats: dict = {"repairs": 0, "cuts": 0}
+    for attempt in range(max_repairs + 1):
+        traj, result = solve_gcs(A, b, edges, q_start, q_goal, order=order, max_rounded_paths=max_rounded_paths,
+                                 solver=solver, seed=seed)
+        stats["solver_status"] = result.get_solution_result().name
+        if not result.is_success():
+            stats["reason"] = f"GCS failed ({stats['solver_status']})"
+            return None, stats
+        stats["cost"] = float(result.get_optimal_cost())
+        path = sample_trajectory(traj, order=order, step_rad=sample_step_rad)
+        if np.max(np.abs(path[0] - q_start)) > 1e-4 or np.max(np.abs(path[-1] - q_goal)) > 1e-4:
+            stats["reason"] = "the solution does not join start and goal"
+            return None, stats
+        path[0], path[-1] = q_start, q_goal
+        path = np.clip(path, lower, upper)
+        if max_repairs == 0:
+            return path, stats  # unchecked: the validator judges it
+        # Sampled regions are not certified: check as the validator does, cut the colliding
+        # configuration off the regions holding it, and solve again.
+        dense = world.interpolate(path, check_resolution_rad)
+        k = world.first_collision(dense)
+        if k < 0:
+            return path, stats
+        if attempt == max_repairs or time.perf_counter() >= deadline:
+            stats["reason"] = "the path through the regions still collides"
+            return None, stats
+        cut = cut_regions(A, b, edges, seeds, dense[k], keep=[q_start, q_goal], world=world)
+        stats["repairs"] = attempt + 1
+        stats["cuts"] += cut
+        if cut == 0:
+            stats["reason"] = "the path through the regions collides and cannot be cut"
+            return None, stats
+    return None, stats
+
+
+class GcsPlanner:
+    """Shortest paths through cached IRIS regions with Drake's GcsTrajectoryOptimization."""
+
+    name: ClassVar[str] = "gcs"
+    Config: ClassVar[type] = GcsConfig
+
+    def __init__(self, config: GcsConfig | None = None) -> None:
+        self.config = config or GcsConfig()
+        self._regions: dict[tuple, tuple[RegionSet | None, dict]] = {}
+
+    def _key(self, problem: PlanningProblem) -> tuple:
+        return (problem.world_key(), problem_hash(problem))
+
+    def prepare(self, problem: PlanningProblem) -> None:
+        """Load (or build, offline) the regions of the problem's world before the clock starts."""
+        key = self._key(problem)
+        if key in self._regions or problem.pre_status is not None or problem.q_goal is None:
+            return
+        t0 = time.perf_counter()
+        rs, info = regions_for(problem, self.config.region_options(), cache_dir=self.config.regions_dir or None,
+                               build=self.config.build_regions)
+        info["prepare_s"] = time.perf_counter() - t0
+        remember(self._regions, key, (rs, info), max_items=16)
+
+    def plan(self, problem: PlanningProblem) -> PlanResult:
+        world = collision_world(problem)
+        bad = check_endpoints(problem, world)
+        if bad is not None:
+            return bad
+        cfg = self.config
+        key = self._key(problem)
+        if key not in self._regions:  # called without prepare (e.g. directly): regions are still offline cost
+            t_off = time.perf_counter()
+            self.prepare(problem)
+            log.info("gcs built/loaded regions inside plan() in %.1f s (offline_s)", time.perf_counter() - t_off)
+        t0 = time.perf_counter()
+        rs, info = self._regions[key]
+        stats: dict = {
+            "solver": cfg.solver.capitalize() if cfg.solver != "scs" else "SCS",
+            "iris": cfg.iris,
+            "world_hash": info["world_hash"],
+            "regions_cache": info["cache"],
+            "regions_added": info["regions_added"],
+            "num_regions": 0 if rs is None else len(rs),
+            "offline_s": 0.0 if rs is None else rs.offline_s,
+        }
+        if rs is None or len(rs) == 0:
+            stats["reason"] = "no regions for this world"
+            return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
+        q_start = np.asarray(problem.q_start, float)
+        q_goal = np.asarray(problem.q_goal, float)
+        stats["regions_connected"] = rs.connected(q_start, q_goal)
+        if not stats["regions_connected"]:
+            stats["reason"] = "the regions do not connect start and goal"
+            stats["solve_time_s"] = time.perf_counter() - t0
+            return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
+
+        A, b = list(rs.A), list(rs.b)  # repairs cut these copies, not the cached set
+        edges = list(rs.edges)
+        path, solve_stats = checked_path(
+            A, b, edges, rs.seeds, q_start, q_goal, world=world, order=cfg.order,
+            max_rounded_paths=cfg.max_rounded_paths, solver=cfg.solver, seed=problem.seed,
+            max_repairs=cfg.max_repairs, check_resolution_rad=cfg.check_resolution_rad,
+            sample_step_rad=cfg.sample_step_rad, deadline=t0 + problem.time_limit_s)
+        stats.update(solve_stats)
+        stats["solve_time_s"] = time.perf_counter() - t0
+        if path is None:
+            return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
+        stats["waypoints"] = len(path)
+        return PlanResult(PlanStatus.SUCCESS, path, stats)

@@ -1,0 +1,139 @@
+"""`python -m suite regions build --dataset NAME[:TIER]`: build `gcs`'s convex regions ahead.
+
+One job per distinct collision world of the dataset's problems, on the local process pool or a
+Dask cluster (the suite's executors, with their hard limits and crash handling); each grows the
+world's region set for all its problems and returns it, and this process stores it under the
+world's hash, where every later `gcs` trial finds it (see `planners.gcs_regions`). Worlds already
+built and verified are not rebuilt (a Dask worker on another machine sees the cache only through
+a shared file system; otherwise it rebuilds).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+from scenes.errors import SuiteError
+from suite.cli.args import positive_int
+
+#: A world's build is killed after this long (the slowest measured: 171 s on 2 busy cores).
+HARD_LIMIT_S = 1800.0
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="action", metavar="ACTION", required=True, parser_class=type(p))
+    b = sub.add_parser("build", help="build (or complete) the gcs regions of every collision world of a dataset")
+    b.add_argument("--dataset", required=True, help="NAME[:TIER] (e.g. recycle-v1:quick)")
+    b.add_argument("--out", default=None,
+                   help="region cache directory (default scenes/datasets/NAME/regions/, read by gcs)")
+    b.add_argument("--iris", default=None, help="IRIS algorithm: np2 or zo (default: gcs's default)")
+    b.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
+    b.add_argument("--executor", choices=("local", "dask"), default="local", help="where jobs run (default local)")
+    b.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://HOST:PORT (with --executor dask)")
+    b.add_argument("--limit", type=positive_int, default=None, help="build only the first K worlds")
+
+
+def _build_world(payload: tuple) -> dict:
+    """Worker: grow one world's regions for each of its problems (in this process)."""
+    problems, options, out = payload
+    from planners.gcs_regions import RegionSet, regions_for
+
+    t0 = time.perf_counter()
+    infos = []
+    rs: RegionSet | None = None
+    for problem in problems:
+        rs, info = regions_for(problem, options, cache_dir=out, build=True)
+        infos.append(info)
+    connected = [bool(rs.connected(p.q_start, p.q_goal)) for p in problems] if rs is not None else []
+    stored = None if rs is None else {
+        "A": [a.tolist() for a in rs.A], "b": [x.tolist() for x in rs.b], "seeds": [q.tolist() for q in rs.seeds],
+        "region_build_s": rs.region_build_s, "offline_s": rs.offline_s, "problems": rs.problems,
+        "edges": [list(e) for e in rs.edges], "iris": rs.iris, "checked": rs.checked,
+    }
+    return {
+        "set": stored,
+        "world_hash": infos[0]["world_hash"],
+        "problems": len(problems),
+        "connected": sum(connected),
+        "regions": 0 if rs is None else len(rs),
+        "offline_s": 0.0 if rs is None else rs.offline_s,
+        "region_build_s": [] if rs is None else list(rs.region_build_s),
+        "cache": [i["cache"] for i in infos],
+        "wall_s": time.perf_counter() - t0,
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from planners.gcs import GcsConfig
+    from planners.gcs_regions import RegionSet, world_hash
+    from suite.problems.dataset import dataset_dir, load_dataset, parse_dataset_arg
+
+    if args.scheduler and args.executor != "dask":
+        raise SuiteError("--scheduler needs --executor dask")
+    ds = load_dataset(args.dataset)
+    options = GcsConfig().region_options() if args.iris is None else GcsConfig(iris=args.iris).region_options()
+    out = Path(args.out) if args.out else dataset_dir(parse_dataset_arg(args.dataset)[0]) / "regions"
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SuiteError(f"--out {str(out)!r} is not writable: {exc.strerror}") from None
+    worlds: dict[str, list] = {}
+    for p in ds.problems:
+        if p.pre_status is None and p.q_goal is not None:
+            worlds.setdefault(world_hash(p, options), []).append(p)
+    items = list(worlds.values())[: args.limit]
+    print(f"{len(ds.problems)} problems in {len(worlds)} collision worlds; building {len(items)} "
+          f"({options.iris}) into {out} ({args.executor}, {args.jobs} workers)", flush=True)
+    from suite.run.executors import Job, LocalExecutor
+
+    if args.executor == "dask":
+        from suite.run.dask_executor import DaskExecutor
+
+        executor = DaskExecutor(scheduler=args.scheduler, n_workers=args.jobs)
+    else:
+        executor = LocalExecutor(jobs=args.jobs)
+    jobs = [Job(world_hash(ps[0], options), _build_world, (ps, options, str(out)), HARD_LIMIT_S) for ps in items]
+    t0 = time.perf_counter()
+    rows = []
+    for k, outcome in enumerate(executor.run(jobs), 1):
+        if outcome.result is None:
+            print(f"[{k}/{len(items)}] {outcome.job.key}: {outcome.failure} ({outcome.message})", flush=True)
+            continue
+        row = dict(outcome.result)
+        stored = row.pop("set")
+        if stored is not None and any(c != "hit" for c in row["cache"]):
+            RegionSet(row["world_hash"], [np.asarray(x, float) for x in stored["A"]],
+                      [np.asarray(x, float) for x in stored["b"]], [np.asarray(x, float) for x in stored["seeds"]],
+                      stored["region_build_s"], stored["offline_s"], stored["problems"],
+                      [tuple(e) for e in stored["edges"]], stored["iris"], stored["checked"],
+                      ).save(out / f"{row['world_hash']}.npz")
+        rows.append(row)
+        print(f"[{k}/{len(items)}] {row['world_hash']}: {row['regions']} regions, "
+              f"{row['connected']}/{row['problems']} connected, offline {row['offline_s']:.1f} s "
+              f"({'/'.join(row['cache'])})", flush=True)
+    wall = time.perf_counter() - t0
+    built = [r for r in rows if any(c != "hit" for c in r["cache"])]
+    per_region = [s for r in rows for s in r["region_build_s"]]
+    summary = {
+        "dataset": args.dataset, "iris": options.iris, "options": options.key_fields(), "worlds": len(rows),
+        "worlds_built_now": len(built), "wall_s": wall,
+        "problems": sum(r["problems"] for r in rows), "connected": sum(r["connected"] for r in rows),
+        "offline_s_median": statistics.median(r["offline_s"] for r in rows) if rows else None,
+        "regions_median": statistics.median(r["regions"] for r in rows) if rows else None,
+        "region_iris_s_median": statistics.median(per_region) if per_region else None,
+        "size_bytes": sum(f.stat().st_size for f in out.glob("*.npz")),
+        "worlds_detail": rows,
+    }
+    (out / "build.json").write_text(json.dumps(summary, indent=1))
+    print(f"{summary['worlds']} worlds ({len(built)} built now) in {wall:.0f} s wall; median per world: "
+          f"{summary['offline_s_median']:.1f} s offline, {summary['regions_median']} regions; median IRIS "
+          f"call {summary['region_iris_s_median'] or 0:.2f} s; start and goal connected for "
+          f"{summary['connected']}/{summary['problems']} problems; cache {summary['size_bytes'] / 1e6:.2f} MB",
+          file=sys.stdout)
+    return 0

@@ -1,0 +1,159 @@
+"""`gcs`: GCS over cached IRIS regions. Its path passes the validator, region building is offline
+cost recorded apart from planning time, a world's regions are built once and reused from disk,
+and a different world (held can, opening) does not reuse them; a region that is not really
+collision-free gives a path the validator rejects (or, with the planner's own check, no path)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from planners import gcs_regions
+from planners.base import PlanStatus
+from planners.gcs import GcsConfig, GcsPlanner
+from planners.gcs_regions import RegionSet, world_hash
+from planners.registry import make_planner
+from planners.worlds import collision_world
+from scenes.errors import SuiteError
+from scenes.grasp_rule import truth_grasp
+from suite.problems.cycle import build_problems
+from suite.run.trial import run_problem
+from suite.scoring.validate import validate_path
+
+# Small, fast regions for tests: IrisZo with one alternation (about 1 s a region on one core).
+FAST = {"iris": "zo", "max_iterations": 1, "num_particles": 100, "check_rounds": 1}
+
+
+def _problem(scene, kind):
+    problems = build_problems(scene, [truth_grasp(scene, scene.cans[0])], time_limit_s=5.0, seed=3)
+    (p,) = [p for p in problems if p.kind == kind]
+    assert p.pre_status is None
+    return p
+
+
+@pytest.fixture(scope="module")
+def open_transit(open_scene):
+    return _problem(open_scene, "transit")
+
+
+@pytest.fixture(scope="module")
+def wall_transit(wall_scene):
+    return _problem(wall_scene, "transit")
+
+
+@pytest.fixture(scope="module")
+def built(open_transit, tmp_path_factory):
+    """One trial of gcs on the open transit with an empty region cache (regions built in prepare)."""
+    cache = tmp_path_factory.mktemp("regions")
+    grown_before = gcs_regions.GROWN_IN_PROCESS
+    record = run_problem(open_transit, planner="gcs", planner_config={**FAST, "regions_dir": str(cache)}, run_seed=0)
+    return record, cache, gcs_regions.GROWN_IN_PROCESS - grown_before
+
+
+def test_path_passes_the_validator_and_offline_time_is_recorded_apart(built, open_transit):
+    record, cache, grown = built
+    assert record["status"] == "success", record["stats"]
+    path = np.asarray(record["path"])
+    assert validate_path(open_transit, path, collision_world(open_transit)) is None
+    s = record["stats"]
+    assert s["solver"] == "Clarabel" and s["iris"] == "zo"
+    assert s["regions_cache"] == "built" and s["num_regions"] == grown >= 1
+    # Building regions is offline: recorded as offline_s and in the set-up time, not in planning.
+    assert s["offline_s"] > 0
+    assert record["setup_time_s"] >= s["offline_s"] > record["planning_time_s"] - s["solve_time_s"]
+    assert len(list(cache.glob("*.npz"))) == 1
+    assert record["metrics"]["length_over_straight"] >= 1.0 - 1e-9
+
+
+def test_second_prepare_reuses_the_cache(built, open_transit):
+    record, cache, _ = built
+    planner = GcsPlanner(GcsConfig(**FAST, regions_dir=str(cache)))  # a fresh process-level planner
+    before = gcs_regions.GROWN_IN_PROCESS
+    planner.prepare(open_transit)
+    r = planner.plan(open_transit)
+    assert gcs_regions.GROWN_IN_PROCESS == before
+    assert r.status is PlanStatus.SUCCESS and r.stats["regions_cache"] == "hit"
+    assert r.stats["offline_s"] == pytest.approx(record["stats"]["offline_s"])
+    assert r.stats["world_hash"] == record["stats"]["world_hash"]
+
+
+def test_a_different_world_misses_the_cache(built, open_transit):
+    _, cache, _ = built
+    options = GcsConfig(**FAST).region_options()
+    h = world_hash(open_transit, options)
+    other_can = open_transit.held.can if open_transit.held is not None else None
+    assert other_can is not None  # a transit carries the can
+    X_GC = open_transit.held.X_GC.copy()
+    X_GC[2, 3] += 0.01
+    moved = open_transit.with_(held=type(open_transit.held)(other_can, X_GC))
+    assert world_hash(moved, options) != h
+    assert world_hash(open_transit.with_(held=None), options) != h
+    assert world_hash(open_transit.with_(gripper_opening_m=open_transit.gripper_opening_m + 0.01), options) != h
+    assert world_hash(open_transit, GcsConfig(**{**FAST, "epsilon": 0.02}).region_options()) != h
+    # Same world, other ends: same hash.
+    assert world_hash(open_transit.with_(q_start=open_transit.q_goal, q_goal=open_transit.q_start), options) == h
+
+    planner = GcsPlanner(GcsConfig(**FAST, regions_dir=str(cache), build_regions=False))
+    r = planner.plan(moved)
+    assert r.status is PlanStatus.NO_SOLUTION and r.stats["regions_cache"] == "miss"
+
+
+def _invalid_region_cache(problem, directory, options):
+    """A cache whose only region is the whole joint-limit box (it holds the wall)."""
+    world = collision_world(problem)
+    lo, hi = world.robot.lower_rad, world.robot.upper_rad
+    A = np.vstack([np.eye(7), -np.eye(7)])
+    b = np.concatenate([hi, -lo])
+    h = world_hash(problem, options)
+    rs = RegionSet(h, [A], [b], [np.asarray(problem.q_start, float)], [0.0], offline_s=1.0,
+                   problems=[gcs_regions.problem_hash(problem)], edges=[], iris=options.iris,
+                   checked=[gcs_regions.problem_hash(problem)])
+    rs.save(directory / f"{h}.npz")
+
+
+def test_an_invalid_region_gives_a_path_the_validator_rejects(wall_transit, tmp_path):
+    cfg = GcsConfig(**FAST, regions_dir=str(tmp_path), build_regions=False, max_repairs=0)
+    _invalid_region_cache(wall_transit, tmp_path, cfg.region_options())
+    record = run_problem(wall_transit, planner="gcs", planner_config={**FAST, "regions_dir": str(tmp_path),
+                                                                       "build_regions": False, "max_repairs": 0},
+                         run_seed=0)
+    assert record["stats"]["num_regions"] == 1 and record["stats"]["regions_cache"] == "hit"
+    assert record["status"] == "invalid_solution"
+    assert "collision" in record["stats"]["invalid_reason"]
+
+
+def test_with_repairs_on_a_colliding_path_is_not_returned(wall_transit, tmp_path):
+    # One convex region holding both ends holds the whole straight segment through the wall: no
+    # face can cut the collision off, and the planner says so instead of returning the path.
+    cfg = GcsConfig(**FAST, regions_dir=str(tmp_path), build_regions=False)
+    assert cfg.max_repairs > 0
+    _invalid_region_cache(wall_transit, tmp_path, cfg.region_options())
+    r = GcsPlanner(cfg).plan(wall_transit)
+    assert r.status is PlanStatus.NO_SOLUTION and r.path is None
+    assert "collides" in r.stats["reason"]
+
+
+def test_registry_and_config_errors():
+    assert isinstance(make_planner("gcs"), GcsPlanner)
+    with pytest.raises(SuiteError, match="iris"):
+        GcsConfig(iris="iris2000")
+    with pytest.raises(SuiteError, match="solver"):
+        GcsConfig(solver="mosek")
+    with pytest.raises(SuiteError, match="epsilon"):
+        GcsConfig(epsilon=0.0)
+
+
+def test_regions_build_cli_builds_once_per_world(tmp_path, capsys):
+    from suite.cli import main
+
+    argv = ["regions", "build", "--dataset", "recycle-v1:quick", "--limit", "1", "--iris", "zo",
+            "--jobs", "1", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    (built,) = tmp_path.glob("*.npz")
+    summary = json.loads((tmp_path / "build.json").read_text())
+    assert summary["worlds"] == 1 and summary["worlds_built_now"] == 1 and summary["iris"] == "zo"
+    assert summary["worlds_detail"][0]["world_hash"] == built.stem and summary["offline_s_median"] > 0
+    capsys.readouterr()
+    assert main(argv) == 0  # the second build finds the world built and verified
+    assert "(0 built now)" in capsys.readouterr().out
+    assert main(["regions", "build", "--dataset", "recycle-v1:quick", "--scheduler", "tcp://h:1"]) == 2
