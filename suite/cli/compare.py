@@ -39,6 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"generated scenes' grasps from perception or from ground truth (default {d.grasps})")
     p.add_argument("--time-limit-s", type=positive_float, default=None,
                    help=f"planning budget per problem, seconds (default {d.time_limit_s})")
+    p.add_argument("--budgets", type=budget_list, default=None, metavar="B1,B2,...",
+                   help="run every planner at each of these planning budgets (seconds), e.g. 0.05,0.2,1,5: "
+                        "success and length against budget (replaces --time-limit-s)")
     p.add_argument("--jobs", type=positive_int, default=None,
                    help=f"worker processes, at most one per pending trial (default {d.jobs})")
     p.add_argument("--memory-limit-mb", type=positive_int, default=None,
@@ -56,6 +59,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --execute: closed loop, perceive and plan again after each pick")
     p.add_argument("--no-plots", action="store_true", help="skip drawing the plots")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def budget_list(text: str) -> tuple[float, ...]:
+    """"0.05,0.2,1,5" -> (0.05, 0.2, 1.0, 5.0): positive, finite, distinct, in ascending order."""
+    import math
+
+    values = []
+    for part in text.split(","):
+        try:
+            v = float(part)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{part.strip()!r} in {text!r} is not a number of seconds") from None
+        if not (math.isfinite(v) and v > 0):
+            raise argparse.ArgumentTypeError(f"budget {part.strip()!r} must be a positive, finite number of seconds")
+        values.append(v)
+    if len(set(values)) != len(values):
+        raise argparse.ArgumentTypeError(f"--budgets {text!r} names a budget twice")
+    return tuple(sorted(values))
 
 
 def _config_file(path: str) -> dict:
@@ -102,7 +123,7 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
         source = f"--config {args.config}: "
         given.update({k: (f"--config {args.config} {k}", v) for k, v in from_file.items()})
     for key in ("variant", "seed", "scenes", "cans", "grasps", "time_limit_s", "jobs", "spec", "executor", "scheduler",
-                "memory_limit_mb"):
+                "memory_limit_mb", "budgets"):
         v = getattr(args, key)
         if v is not None:
             values[key] = v
@@ -123,9 +144,15 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     values["planners"] = tuple(parse_planner_list(str(planners)))
     if args.planners is not None:
         given["planners"] = ("--planners", values["planners"])
+    if getattr(args, "budgets", None) and args.time_limit_s is not None:
+        raise SuiteError("--budgets sets the planning budgets; --time-limit-s sets one: use one or the other")
+    if getattr(args, "budgets", None) and (args.execute or args.reperceive):
+        raise SuiteError("--execute runs one plan per problem; with --budgets there is one per budget: run them apart")
     if args.resume and args.out:
         values = _resumed_settings(Path(args.out), values, given)
-
+    if isinstance(values.get("budgets"), list):  # from a YAML file or a manifest
+        values["budgets"] = tuple(float(b) if isinstance(b, int) and not isinstance(b, bool) else b
+                                  for b in values["budgets"])
     if isinstance(values["time_limit_s"], int) and not isinstance(values["time_limit_s"], bool):
         values["time_limit_s"] = float(values["time_limit_s"])
     config = _validated(values, source=source)

@@ -13,10 +13,12 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from matplotlib.ticker import NullFormatter
 from tabulate import tabulate
 
 from suite.report.outcomes import family_of, outcomes, solved_count, wilson_interval
 from suite.report.plots_common import planner_colors, plt, save_figure
+from suite.run.records import metric
 
 
 def budgets_in(records: Sequence[dict[str, Any]]) -> list[float]:
@@ -35,11 +37,12 @@ def by_budget_view(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return [{**r, "planner": budget_label(str(r["planner"]), float(r["time_limit_s"]))} for r in records]
 
 
-def _cell(records: Sequence[dict], planner: str, budget: float, family: str | None):
+def _cell(records: Sequence[dict], planner: str, budget: float, family: str | None,
+          metric: str = "length_ratio"):
     mine = [r for r in records if r["planner"] == planner and float(r["time_limit_s"]) == budget
             and (family is None or family_of(r) == family)]
-    oc = list(outcomes(mine, metrics=("length_ratio",)).values())
-    ratios = np.array([o.metrics["length_ratio"] for o in oc], float)
+    oc = list(outcomes(mine, metrics=(metric,)).values())
+    ratios = np.array([o.metrics[metric] for o in oc], float)
     ratios = ratios[np.isfinite(ratios)]
     return solved_count(oc), len(oc), ratios
 
@@ -69,12 +72,15 @@ def plot_budget_curves(records: Sequence[dict[str, Any]], *, planners: Sequence[
     """Success rate (with its 95% Wilson band) and median length ratio (with its quartiles) of each
     planner against the planning budget, log budget axis."""
     colors = planner_colors(planners)
+    # generated scenes carry no reference length: their curve shows the joint path length instead
+    has_ratio = any(math.isfinite(v) for v in (metric(r, "length_ratio") for r in records))
+    name = "length_ratio" if has_ratio else "path_length_rad"
     fig, (ax_s, ax_l) = plt.subplots(1, 2, figsize=(12, 4.6))
     for p in planners:
         budgets = budgets_in([r for r in records if r["planner"] == p])
         rates, lows, highs, med, q1, q3 = [], [], [], [], [], []
         for b in budgets:
-            k, n, ratios = _cell(records, p, b, None)
+            k, n, ratios = _cell(records, p, b, None, name)
             lo, hi = wilson_interval(k, n)
             rates.append(100 * k / n if n else math.nan)
             lows.append(100 * lo)
@@ -87,16 +93,20 @@ def plot_budget_curves(records: Sequence[dict[str, Any]], *, planners: Sequence[
         ax_s.fill_between(budgets, lows, highs, color=colors[p], alpha=0.15, linewidth=0)
         ax_l.plot(budgets, med, "-o", color=colors[p], label=p, markersize=4)
         ax_l.fill_between(budgets, q1, q3, color=colors[p], alpha=0.15, linewidth=0)
+    ticks = budgets_in(records)
     for ax in (ax_s, ax_l):
         ax.set_xscale("log")
+        ax.set_xticks(ticks, [f"{b:g}" for b in ticks])
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel("planning budget per problem (s, log)")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
     ax_s.set_ylim(0, 102)
     ax_s.set_ylabel("problems solved (%)")
     ax_s.set_title("Success vs budget (band: 95% Wilson interval)")
-    ax_l.axhline(1.0, color="0.3", linestyle="--", linewidth=1)
-    ax_l.set_ylabel("length / reference (1 = best known)")
+    if has_ratio:
+        ax_l.axhline(1.0, color="0.3", linestyle="--", linewidth=1)
+    ax_l.set_ylabel("length / reference (1 = best known)" if has_ratio else "joint path length (rad)")
     ax_l.set_title("Path length vs budget (median; band: quartiles; solved problems)")
     fig.tight_layout()
     return save_figure(fig, path)

@@ -64,6 +64,8 @@ class CompareConfig:
     dataset: str | None = DEFAULT_DATASET
     #: each worker process's address-space cap, MiB (a trial beyond it: `crash`, `out_of_memory`)
     memory_limit_mb: Annotated[int, Field(ge=256, strict=True)] = DEFAULT_MEMORY_LIMIT_MB
+    #: planning budgets (s): every planner runs every problem at each (empty: time_limit_s alone)
+    budgets: tuple[Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)], ...] = ()
 
 
 def worker_init() -> None:
@@ -120,9 +122,9 @@ def scene_grasps(scene, *, grasps: str):
 
 
 def prepare_trials(config: CompareConfig, *, progress=None) -> list[TrialSpec]:
-    """One trial per distinct problem and planner: the dataset's stored problems, or problems of
-    generated scenes (identical problems kept once, each with its identity, triviality and
-    difficulty)."""
+    """One trial per distinct problem and planner (and budget, with `budgets`): the dataset's stored
+    problems, or problems of generated scenes (identical problems kept once, each with its
+    identity, triviality and difficulty)."""
     from planners.registry import planner_class
 
     configs = {}
@@ -131,9 +133,11 @@ def prepare_trials(config: CompareConfig, *, progress=None) -> list[TrialSpec]:
         configs[name] = config_dict(make_config(cls, config.planner_configs.get(name)))
     trials = []
     for problem, meta in (_dataset_problems(config) if config.dataset else _generated_problems(config, progress)):
-        for name in config.planners:
-            trials.append(make_trial(problem, planner=name, planner_config=configs[name], run_seed=config.seed,
-                                     meta=meta))
+        for budget in config.budgets or (None,):
+            at = problem if budget is None else problem.with_(time_limit_s=float(budget))
+            for name in config.planners:
+                trials.append(make_trial(at, planner=name, planner_config=configs[name], run_seed=config.seed,
+                                         meta=meta if budget is None else {**meta, "budget_s": float(budget)}))
     return trials
 
 

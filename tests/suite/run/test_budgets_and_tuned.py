@@ -1,0 +1,47 @@
+"""compare --budgets: every planner at every budget, the budget on each trial; bad budgets refused
+in one line. Tuned settings are every run's defaults, and --config overrides them."""
+
+from __future__ import annotations
+
+import pytest
+
+from planners.tuned import tuned_settings
+from suite.cli import main
+from suite.run.runner import CompareConfig, prepare_trials
+
+
+def test_budgets_multiply_the_trials_and_are_recorded():
+    base = CompareConfig(planners=("rrt", "ik"), dataset="recycle-v1:quick")
+    plain = prepare_trials(base)
+    budgets = prepare_trials(CompareConfig(planners=("rrt", "ik"), dataset="recycle-v1:quick", budgets=(0.2, 1.0)))
+    assert len(budgets) == 2 * len(plain)
+    assert len({t.trial_id for t in budgets}) == len(budgets)  # a budget is part of the trial's identity
+    assert sorted({t.problem.time_limit_s for t in budgets}) == [0.2, 1.0]
+    assert all(t.meta["budget_s"] == t.problem.time_limit_s for t in budgets)
+    assert {t.meta["problem_id"] for t in budgets} == {t.meta["problem_id"] for t in plain}
+
+
+@pytest.mark.parametrize("argv, expected", [
+    (["--budgets", "0,1"], "budget '0' must be a positive, finite number of seconds"),
+    (["--budgets", "0.2,x"], "'x' in '0.2,x' is not a number of seconds"),
+    (["--budgets", "1,1"], "names a budget twice"),
+    (["--budgets", "0.2,1", "--time-limit-s", "2"], "use one or the other"),
+    (["--budgets", "0.2,1", "--execute"], "run them apart"),
+])
+def test_bad_budgets_are_one_line(argv, expected, tmp_path, capsys):
+    try:
+        code = main(["compare", "--planners", "rrt", "--out", str(tmp_path / "run"), *argv])
+    except SystemExit as exc:  # argparse's own one-line error
+        code = exc.code
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert code == 2 and len(err) == 1 and expected in err[0], err
+    assert not (tmp_path / "run" / "trials.jsonl").exists()
+
+
+def test_tuned_settings_are_the_defaults_and_config_overrides_them():
+    tuned = tuned_settings("rrt")
+    assert tuned, "planners/configs/rrt.yaml ships the tuned settings"
+    (default,) = {t.planner_config["range_rad"] for t in prepare_trials(CompareConfig(planners=("rrt",)))}
+    assert default == tuned["range_rad"]
+    over = prepare_trials(CompareConfig(planners=("rrt",), planner_configs={"rrt": {"range_rad": 0.3}}))
+    assert {t.planner_config["range_rad"] for t in over} == {0.3}
