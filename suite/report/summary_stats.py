@@ -39,6 +39,7 @@ SUMMARY_METRICS: dict[str, str] = {
     "sparc": "SPARC (higher: smoother)",
     "clearance_min_m": "min clearance (m)",
     "duration_s": "duration (s)",
+    "offline_s": "offline (s)",
 }
 ALL = "all"
 N_RESAMPLES = 2000

@@ -126,6 +126,20 @@ def reap_children(*, keep: frozenset[int] = frozenset(), timeout_s: float = 5.0)
         if child.is_alive():
             child.kill()
             child.join(timeout=2.0)
+    _stop_resource_tracker()
+
+
+def _stop_resource_tracker() -> None:
+    """Stop (and wait for) the resource tracker that spawning workers started: left to exit after
+    this process, it would be an orphan, a zombie where the container's init does not reap."""
+    from multiprocessing import resource_tracker
+
+    stop = getattr(resource_tracker._resource_tracker, "_stop", None)  # CPython 3.8+ (private)
+    if stop is not None:
+        try:
+            stop()
+        except Exception:  # nothing to stop, or already stopping: the tracker exits with us anyway
+            pass
 
 
 @contextlib.contextmanager

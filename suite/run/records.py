@@ -137,6 +137,9 @@ def metric(rec: dict[str, Any], name: str) -> float:
     """
     if name == "time_to_trajectory_s":
         return metric(rec, "planning_time_s") + metric(rec, "timing_time_s")
+    if name == "offline_s":  # a planner's offline preparation of the problem's world (gcs regions)
+        value = (rec.get("stats") or {}).get("offline_s")
+        return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
     if name in TOP_LEVEL_METRICS:
         value = rec.get(name)
     else:
