@@ -68,10 +68,9 @@ def _build_world(payload: tuple) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
 
     from planners.gcs import GcsConfig
-    from planners.gcs_regions import RegionSet, world_hash
+    from planners.gcs_regions import world_hash
     from suite.problems.dataset import dataset_dir, load_dataset, parse_dataset_arg
 
     if args.scheduler and args.executor != "dask":
@@ -99,25 +98,57 @@ def run(args: argparse.Namespace) -> int:
     else:
         executor = LocalExecutor(jobs=args.jobs)
     jobs = [Job(world_hash(ps[0], options), _build_world, (ps, options, str(out)), HARD_LIMIT_S) for ps in items]
+    from suite.run.interrupt import Interrupted, SignalGuard
+    from suite.run.lock import LOCK_FILE, RunLock
+
+    rows: list[dict] = []
+    with SignalGuard(), RunLock(out, what="regions build"):  # one build per regions directory
+        try:
+            code = _build_all(executor, jobs, items, out, rows, args, options)
+        except Interrupted as exc:
+            print(f"interrupted by {exc.name}: the {len(rows)} world(s) finished are kept in {out}; run the same "
+                  f"command again to build the rest", file=sys.stderr)
+            return exc.exit_code
+        finally:
+            (out / LOCK_FILE).unlink(missing_ok=True)  # the directory is committed as data
+    return code
+
+
+def _build_all(executor, jobs, items, out: Path, rows: list[dict], args, options) -> int:
+    """Run the world builds, saving each world's regions as it finishes; write build.json."""
     t0 = time.perf_counter()
-    rows = []
-    for k, outcome in enumerate(executor.run(jobs), 1):
-        if outcome.result is None:
-            print(f"[{k}/{len(items)}] {outcome.job.key}: {outcome.failure} ({outcome.message})", flush=True)
-            continue
-        row = dict(outcome.result)
-        stored = row.pop("set")
-        if stored is not None and any(c != "hit" for c in row["cache"]):
-            RegionSet(row["world_hash"], [np.asarray(x, float) for x in stored["A"]],
-                      [np.asarray(x, float) for x in stored["b"]], [np.asarray(x, float) for x in stored["seeds"]],
-                      stored["region_build_s"], stored["offline_s"], stored["problems"],
-                      [tuple(e) for e in stored["edges"]], stored["iris"], stored["checked"],
-                      ).save(out / f"{row['world_hash']}.npz")
-        rows.append(row)
-        print(f"[{k}/{len(items)}] {row['world_hash']}: {row['regions']} regions, "
-              f"{row['connected']}/{row['problems']} connected, offline {row['offline_s']:.1f} s "
-              f"({'/'.join(row['cache'])})", flush=True)
-    wall = time.perf_counter() - t0
+    outcomes = executor.run(jobs)
+    try:
+        for k, outcome in enumerate(outcomes, 1):
+            _record_world(k, outcome, items, out, rows)
+    finally:
+        outcomes.close()  # an error or a signal stops the workers at once
+    return _write_summary(rows, out, args, options, wall=time.perf_counter() - t0)
+
+
+def _record_world(k: int, outcome, items, out: Path, rows: list[dict]) -> None:
+    import numpy as np
+
+    from planners.gcs_regions import RegionSet
+
+    if outcome.result is None:
+        print(f"[{k}/{len(items)}] {outcome.job.key}: {outcome.failure} ({outcome.message})", flush=True)
+        return
+    row = dict(outcome.result)
+    stored = row.pop("set")
+    if stored is not None and any(c != "hit" for c in row["cache"]):
+        RegionSet(row["world_hash"], [np.asarray(x, float) for x in stored["A"]],
+                  [np.asarray(x, float) for x in stored["b"]], [np.asarray(x, float) for x in stored["seeds"]],
+                  stored["region_build_s"], stored["offline_s"], stored["problems"],
+                  [tuple(e) for e in stored["edges"]], stored["iris"], stored["checked"],
+                  ).save(out / f"{row['world_hash']}.npz")
+    rows.append(row)
+    print(f"[{k}/{len(items)}] {row['world_hash']}: {row['regions']} regions, "
+          f"{row['connected']}/{row['problems']} connected, offline {row['offline_s']:.1f} s "
+          f"({'/'.join(row['cache'])})", flush=True)
+
+
+def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float) -> int:
     built = [r for r in rows if any(c != "hit" for c in r["cache"])]
     per_region = [s for r in rows for s in r["region_build_s"]]
     summary = {
