@@ -32,19 +32,12 @@ from typing import ClassVar
 import numpy as np
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
-from planners.gcs_regions import (
-    RegionOptions,
-    RegionSet,
-    cut_regions,
-    problem_hash,
-    regions_for,
-)
+from planners.gcs_regions import RegionOptions, RegionSet, problem_hash, regions_for
+from planners.gcs_solve import SOLVERS, checked_path
 from planners.worlds import collision_world, remember
 from scenes.errors import SuiteError
 
 log = logging.getLogger(__name__)
-
-SOLVERS = ("clarabel", "scs")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,118 +84,6 @@ class GcsConfig(RegionOptions):
     def region_options(self) -> RegionOptions:
         names = {f.name for f in dataclasses.fields(RegionOptions)}
         return RegionOptions(**{k: v for k, v in dataclasses.asdict(self).items() if k in names})
-
-
-def _solver(name: str):
-    from pydrake.solvers import ClarabelSolver, ScsSolver
-
-    return {"clarabel": ClarabelSolver, "scs": ScsSolver}[name]()
-
-
-def sample_trajectory(traj, *, order: int, step_rad: float) -> np.ndarray:
-    """Waypoints (N, 7) of a composite Bezier trajectory: segment ends for straight segments,
-    samples at most about `step_rad` apart on curved ones; repeated points dropped."""
-    points = []
-    for i in range(traj.get_number_of_segments()):
-        seg = traj.segment(i)
-        t0, t1 = seg.start_time(), seg.end_time()
-        a, b = seg.value(t0).ravel(), seg.value(t1).ravel()
-        if order <= 1 or np.allclose(a, b):
-            ts = [t0, t1]
-        else:
-            coarse = np.array([seg.value(t).ravel() for t in np.linspace(t0, t1, 9)])
-            length = np.linalg.norm(np.diff(coarse, axis=0), axis=1).sum()
-            ts = np.linspace(t0, t1, max(2, int(np.ceil(length / step_rad)) + 1))
-        points += [seg.value(t).ravel() for t in ts]
-    out = [points[0]]
-    for p in points[1:]:
-        if np.linalg.norm(p - out[-1]) > 1e-9:
-            out.append(p)
-    return np.array(out)
-
-
-def solve_gcs(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.ndarray, *, order: int = 1,
-              max_rounded_paths: int = 5, solver: str = "clarabel", seed: int = 0):
-    """One GCS shortest-path solve (convex relaxation, rounding, restriction) through the regions
-    {A_i q <= b_i} joined by `edges`, from the point q_start to the point q_goal.
-
-    Returns:
-        (trajectory, MathematicalProgramResult).
-    """
-    from pydrake.geometry.optimization import (
-        GraphOfConvexSetsOptions,
-        HPolyhedron,
-        Point,
-    )
-    from pydrake.planning import GcsTrajectoryOptimization
-
-    gcs = GcsTrajectoryOptimization(len(q_start))
-    main = gcs.AddRegions([HPolyhedron(Ai, bi) for Ai, bi in zip(A, b)], edges, order, name="regions")
-    source = gcs.AddRegions([Point(q_start)], 0, name="start")
-    target = gcs.AddRegions([Point(q_goal)], 0, name="goal")
-    gcs.AddEdges(source, main)
-    gcs.AddEdges(main, target)
-    gcs.AddPathLengthCost(1.0)
-    options = GraphOfConvexSetsOptions()
-    options.convex_relaxation = True
-    options.preprocessing = True
-    options.max_rounded_paths = max_rounded_paths
-    options.rounding_seed = int(seed) % (2**31)
-    options.solver = _solver(solver)
-    drake_log = logging.getLogger("drake")
-    level = drake_log.level
-    drake_log.setLevel(logging.WARNING)  # Drake logs every solve and rounding at INFO
-    try:
-        return gcs.SolvePath(source, target, options)
-    finally:
-        drake_log.setLevel(level)
-
-
-def checked_path(A: list, b: list, edges: list, seeds: list, q_start: np.ndarray, q_goal: np.ndarray, *, world,
-                 order: int = 1, max_rounded_paths: int = 5, solver: str = "clarabel", seed: int = 0,
-                 max_repairs: int = 5, check_resolution_rad: float = 0.01, sample_step_rad: float = 0.02,
-                 deadline: float = float("inf")) -> tuple[np.ndarray | None, dict]:
-    """Solve, check the path with the python-fcl world as the validator does, and where it collides
-    cut the colliding configuration off the regions holding it (A, b, edges are changed in place)
-    and solve again, up to `max_repairs` times or the deadline (time.perf_counter()).
-
-    Returns:
-        (path (N, 7) or None, stats: solver_status, cost, repairs, cuts, reason when None).
-    """
-    lower, upper = world.robot.lower_rad, world.robot.upper_rad
-    stats: dict = {"repairs": 0, "cuts": 0}
-    for attempt in range(max_repairs + 1):
-        traj, result = solve_gcs(A, b, edges, q_start, q_goal, order=order, max_rounded_paths=max_rounded_paths,
-                                 solver=solver, seed=seed)
-        stats["solver_status"] = result.get_solution_result().name
-        if not result.is_success():
-            stats["reason"] = f"GCS failed ({stats['solver_status']})"
-            return None, stats
-        stats["cost"] = float(result.get_optimal_cost())
-        path = sample_trajectory(traj, order=order, step_rad=sample_step_rad)
-        if np.max(np.abs(path[0] - q_start)) > 1e-4 or np.max(np.abs(path[-1] - q_goal)) > 1e-4:
-            stats["reason"] = "the solution does not join start and goal"
-            return None, stats
-        path[0], path[-1] = q_start, q_goal
-        path = np.clip(path, lower, upper)
-        if max_repairs == 0:
-            return path, stats  # unchecked: the validator judges it
-        # Sampled regions are not certified: check as the validator does, cut the colliding
-        # configuration off the regions holding it, and solve again.
-        dense = world.interpolate(path, check_resolution_rad)
-        k = world.first_collision(dense)
-        if k < 0:
-            return path, stats
-        if attempt == max_repairs or time.perf_counter() >= deadline:
-            stats["reason"] = "the path through the regions still collides"
-            return None, stats
-        cut = cut_regions(A, b, edges, seeds, dense[k], keep=[q_start, q_goal], world=world)
-        stats["repairs"] = attempt + 1
-        stats["cuts"] += cut
-        if cut == 0:
-            stats["reason"] = "the path through the regions collides and cannot be cut"
-            return None, stats
-    return None, stats
 
 
 class GcsPlanner:

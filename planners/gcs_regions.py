@@ -17,7 +17,7 @@ Sampled-IRIS regions are only probabilistically collision-free, and Drake's geom
 validator's, so each region is also checked with the python-fcl world (the validator's engine):
 uniform samples, and the start-goal segment when a region holds both ends, are cut off where they
 collide. Then GCS is solved for the problem as the planner will solve it, its path checked with
-the python-fcl world and the colliding configurations cut off (`planners.gcs.checked_path`),
+the python-fcl world and the colliding configurations cut off (`planners.gcs_solve.checked_path`),
 reconnecting along the guide path when a cut disconnects, for up to VERIFY_ROUNDS rounds. The
 planner still checks its path online; the suite's validator judges it like every other planner's.
 
@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from planners.gcs_solve import checked_path, cut_at_collision
 from scenes.errors import SuiteError
 
 log = logging.getLogger(__name__)
@@ -161,7 +162,7 @@ class RegionSet:
         iris: the algorithm.
         checked: problem hashes for which the set was verified offline: the blocked start-goal
             segment cut out (`cut_blocked_segment`), start and goal connected, and GCS's path
-            checked with the python-fcl world and repaired by cuts (`planners.gcs.checked_path`).
+            checked with the python-fcl world and repaired by cuts (`planners.gcs_solve.checked_path`).
     """
 
     world_hash: str
@@ -363,54 +364,6 @@ class RegionBuilder:
         return None
 
 
-def cut_at_collision(A: np.ndarray, b: np.ndarray, *, world, center: np.ndarray, q_bad: np.ndarray,
-                     keep: list[np.ndarray], margin_rad: float, resolution_rad: float = 0.01):
-    """Add a face to {A q <= b} that cuts off the first python-fcl collision on the segment from a
-    free configuration inside (`center`, else one of `keep`) towards `q_bad`, `margin_rad` short of
-    it and normal to that segment, keeping every configuration in `keep` inside. Returns (A, b),
-    unchanged if no such cut exists."""
-    for c in [center, *keep]:
-        c = np.asarray(c, float)
-        if np.linalg.norm(q_bad - c) < 1e-9:
-            continue
-        dense = world.interpolate(np.stack([c, q_bad]), resolution_rad)
-        k = world.first_collision(dense)
-        if k <= 0:
-            continue
-        d = dense[k] - c
-        dist = float(np.linalg.norm(d))
-        n = d / dist
-        offset = float(n @ c) + max(dist - margin_rad, 0.5 * dist)
-        if all(float(n @ q) <= offset for q in keep):
-            return np.vstack([A, n]), np.append(b, offset)
-    return A, b
-
-
-def cut_regions(A: list, b: list, edges: list, seeds: list, q_bad: np.ndarray, *, keep: list[np.ndarray],
-                world) -> int:
-    """Cut `q_bad` off every region holding it (A, b, edges changed in place), keeping the
-    configurations of `keep` that a region holds. Returns the number of regions cut."""
-    from pydrake.geometry.optimization import HPolyhedron
-
-    cuts = 0
-    for i in range(len(A)):
-        if not np.all(A[i] @ q_bad <= b[i] + 1e-9):
-            continue
-        inside = [q for q in keep if np.all(A[i] @ q <= b[i] + 1e-9)]
-        A2, b2 = cut_at_collision(A[i], b[i], world=world, center=np.asarray(seeds[i], float), q_bad=q_bad,
-                                  keep=inside, margin_rad=0.01)
-        if len(b2) == len(b[i]):
-            continue
-        cuts += 1
-        A[i], b[i] = A2, b2
-        poly = HPolyhedron(A2, b2)
-        edges[:] = [e for e in edges if i not in e]
-        for j in range(len(A)):
-            if j != i and poly.IntersectsWith(HPolyhedron(A[j], b[j])):
-                edges += [(i, j), (j, i)]
-    return cuts
-
-
 def cut_blocked_segment(rs: RegionSet, q0: np.ndarray, q1: np.ndarray, *, world, margin_rad: float) -> int:
     """If the straight segment q0 -> q1 collides (python-fcl), cut it out of every region holding
     both ends (such a region holds the whole segment: the shortest path would take it). Each cut
@@ -562,8 +515,6 @@ def grow_for_problem(rs: RegionSet, problem, builder: RegionBuilder) -> int:
 
     # Connect start and goal along the guide path; then solve GCS as the planner will and cut
     # what the python-fcl world finds in collision (a cut may disconnect: walk again).
-    from planners.gcs import checked_path
-
     guide = None
     for _ in range(VERIFY_ROUNDS):
         if not rs.connected(q0, q1):
