@@ -157,3 +157,23 @@ def test_interrupted_execute_writes_nothing(tmp_path):
     assert err.strip().splitlines()[-1] == f"interrupted by SIGTERM: nothing written to {out}"
     assert not (out / "execution.json").exists()
     assert _group_gone(proc.pid)
+
+
+def test_interrupted_regions_build_keeps_the_worlds_built(tmp_path):
+    out = tmp_path / "regions"
+    proc = subprocess.Popen([sys.executable, "-m", "suite", "regions", "build", "--dataset", "recycle-v1:quick",
+                             "--out", str(out), "--iris", "zo", "--jobs", "1", "--limit", "40"], cwd=ROOT, env=_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while len(list(out.glob("*.npz"))) < 2:  # two worlds built: interrupt the third or a later one
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and "Traceback" not in err, err
+    kept = len(list(out.glob("*.npz")))
+    assert kept >= 2 and err.strip().splitlines()[-1] == (
+        f"interrupted by SIGINT: the {kept} world(s) finished are kept in {out}; run the same command again to "
+        "build the rest")
+    assert not (out / ".lock").exists() and not (out / "build.json").exists()
+    assert _group_gone(proc.pid)
