@@ -177,3 +177,16 @@ def test_interrupted_regions_build_keeps_the_worlds_built(tmp_path):
         "build the rest")
     assert not (out / ".lock").exists() and not (out / "build.json").exists()
     assert _group_gone(proc.pid)
+
+
+def test_no_process_outlives_a_finished_run(tmp_path):
+    out = tmp_path / "run"
+    proc = _start([*SLEEPY, "--scenes", "1", "--out", str(out)])
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    try:  # at the very moment the run has exited, nothing of its process group is left
+        os.killpg(proc.pid, 0)
+        left = True
+    except ProcessLookupError:
+        left = False
+    assert not left, "a worker or the resource tracker outlived the run"
