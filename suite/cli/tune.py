@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
             "chosen_by": "python -m suite " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["tune"] else "suite tune",
             "rule": "most distinct problems solved; ties: lowest median time to solve (failures at the budget) for "
                     "objective 'time', lowest median length ratio on the problems every candidate solved for "
-                    "'length'; then the earlier candidate",
+                    "'length', within 10% (time) or 1% (length) counted as equal; then the earlier candidate",
             "objective": objective,
             "dataset": {"name": ds.name, "hash": ds.hash, "split": "tune", "problems": len(problems),
                         "per_family": args.per_family, "non_trivial_only": True},

@@ -5,7 +5,8 @@ Rule (documented in the README and written into the tuned-config file):
 2. among candidates that solve as many, a feasibility planner ("time") takes the lowest median
    time to solve (failures at the budget), an optimizing planner ("length") the lowest median
    length over the best known path on the problems every candidate solved;
-3. a remaining tie keeps the earlier candidate (the grid lists class defaults first).
+3. a difference within `TOLERANCE` (10% in time, 1% in length) is a tie, and a tie keeps the
+   earlier candidate (the grid lists class defaults first).
 """
 
 from __future__ import annotations
@@ -20,6 +21,9 @@ import numpy as np
 from suite.report.outcomes import Outcome, outcomes, solved_count
 
 TUNING_METRICS = ("planning_time_s", "length_ratio", "path_length_rad")
+#: Relative differences of the tie-break figure treated as equal: 10% in median time (timings on a
+#: shared machine vary that much), 1% in median length ratio.
+TOLERANCE = {"time": 0.10, "length": 0.01}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,7 +76,9 @@ def choose(results: Sequence[CandidateResult], *, objective: str) -> int:
         return v if math.isfinite(v) else math.inf
 
     tied = [i for i, r in enumerate(results) if r.solved == best]
-    return min(tied, key=lambda i: (cost(results[i]), i))
+    lowest = min(cost(results[i]) for i in tied)
+    # a difference within the tolerance is noise: the earlier candidate (the defaults first) keeps it
+    return next(i for i in tied if cost(results[i]) <= lowest * (1 + TOLERANCE[objective]))
 
 
 def table_rows(results: Sequence[CandidateResult], *, chosen: int) -> list[dict[str, Any]]:

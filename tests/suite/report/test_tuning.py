@@ -45,6 +45,11 @@ def test_choice_rule_success_first_then_the_objective_then_order():
     assert choose(results, objective="length") == 2
     assert choose([_result(9, 0.3, 1.4), _result(9, 0.9, 1.1)], objective="length") == 1
     assert choose([_result(9, math.nan, math.nan), _result(9, 0.5, 1.3)], objective="time") == 1
+    # within the tolerance the earlier candidate (the defaults) keeps it: 1% in length, 10% in time
+    assert choose([_result(9, 0.3, 1.005), _result(9, 0.3, 1.0)], objective="length") == 0
+    assert choose([_result(9, 0.3, 1.02), _result(9, 0.3, 1.0)], objective="length") == 1
+    assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.0)], objective="time") == 0
+    assert choose([_result(9, 0.2, 1.0), _result(9, 0.1, 1.0)], objective="time") == 1
 
 
 def test_weak_family_is_flagged_only_when_another_candidate_does_better():
