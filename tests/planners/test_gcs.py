@@ -15,30 +15,11 @@ from planners.gcs_regions import RegionSet, world_hash
 from planners.registry import make_planner
 from planners.worlds import collision_world
 from scenes.errors import SuiteError
-from scenes.grasp_rule import truth_grasp
-from suite.problems.cycle import build_problems
 from suite.run.trial import run_problem
 from suite.scoring.validate import validate_path
 
 # Small, fast regions for tests: IrisZo with one alternation (about 1 s a region on one core).
 FAST = {"iris": "zo", "max_iterations": 1, "num_particles": 100, "check_rounds": 1}
-
-
-def _problem(scene, kind):
-    problems = build_problems(scene, [truth_grasp(scene, scene.cans[0])], time_limit_s=5.0, seed=3)
-    (p,) = [p for p in problems if p.kind == kind]
-    assert p.pre_status is None
-    return p
-
-
-@pytest.fixture(scope="module")
-def open_transit(open_scene):
-    return _problem(open_scene, "transit")
-
-
-@pytest.fixture(scope="module")
-def wall_transit(wall_scene):
-    return _problem(wall_scene, "transit")
 
 
 @pytest.fixture(scope="module")

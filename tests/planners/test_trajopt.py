@@ -16,23 +16,6 @@ from suite.problems.cycle import build_problems
 from planners.worlds import collision_world
 
 
-def _problem(scene, kind):
-    problems = build_problems(scene, [truth_grasp(scene, scene.cans[0])], time_limit_s=5.0, seed=3)
-    (p,) = [p for p in problems if p.kind == kind]
-    assert p.pre_status is None
-    return p
-
-
-@pytest.fixture(scope="module")
-def wall_transit(wall_scene):
-    return _problem(wall_scene, "transit")
-
-
-@pytest.fixture(scope="module")
-def open_transit(open_scene):
-    return _problem(open_scene, "transit")
-
-
 def _check_path(problem, r, output_samples=100):
     world = collision_world(problem)
     assert r.status is PlanStatus.SUCCESS, r.stats
