@@ -139,14 +139,21 @@ def cluster_bootstrap_median_ci(
     labels = {c: i for i, c in enumerate(dict.fromkeys(clusters))}
     if len(values) < 2 or len(labels) < 2:
         return math.nan, math.nan
-    members = [[] for _ in labels]
-    for j, c in enumerate(clusters):
-        members[labels[c]].append(j)
-    members_arr = [np.asarray(m) for m in members]
-    medians = np.empty(n_resamples)
-    for b in range(n_resamples):
-        drawn = rng.integers(0, len(members_arr), size=len(members_arr))
-        medians[b] = np.median(values[np.concatenate([members_arr[i] for i in drawn])])
+    # A resample is the multiset of the drawn clusters' values: each value weighted by how often its
+    # cluster was drawn. Its median is read off the sorted values and the cumulative weights (the
+    # same number np.median gives on the concatenated values), for all resamples at once.
+    order = np.argsort(values, kind="stable")
+    sorted_values = values[order]
+    cluster_of = np.array([labels[c] for c in clusters])[order]
+    n_clusters = len(labels)
+    drawn = rng.integers(0, n_clusters, size=(n_resamples, n_clusters))
+    times_drawn = np.zeros((n_resamples, n_clusters), dtype=np.int64)
+    np.add.at(times_drawn, (np.arange(n_resamples)[:, None], drawn), 1)
+    cum = np.cumsum(times_drawn[:, cluster_of], axis=1)
+    total = cum[:, -1]
+    lower = np.argmax(cum > ((total - 1) // 2)[:, None], axis=1)
+    upper = np.argmax(cum > (total // 2)[:, None], axis=1)
+    medians = (sorted_values[lower] + sorted_values[upper]) / 2
     alpha = (1.0 - level) / 2
     lo, hi = np.percentile(medians, [100 * alpha, 100 * (1 - alpha)])
     return float(lo), float(hi)
