@@ -24,9 +24,9 @@ from suite.report.summary_stats import (
     GroupSummary,
     MetricStats,
     PairedComparison,
-    common_subset_stats,
+    RunSummary,
     paired_comparisons,
-    summarize,
+    summarize_run,
 )
 from suite.report.summary_tables import summary_markdown
 from suite.run.records import STATUSES, planners_in, problem_counts
@@ -53,7 +53,8 @@ def _success_json(g: GroupSummary) -> dict[str, Any]:
 
 
 def summary_json(
-    records: Sequence[dict[str, Any]], *, pairs: Sequence[PairedComparison], planners: Sequence[str]
+    records: Sequence[dict[str, Any]], *, pairs: Sequence[PairedComparison], planners: Sequence[str],
+    summary: RunSummary | None = None,
 ) -> dict[str, Any]:
     """The machine-readable summary: the same numbers as summary.md, NaN written as null.
 
@@ -63,7 +64,8 @@ def summary_json(
     metrics}}, by_kind: {KIND: {success, metrics}}}}, metrics (their definitions), paired: [...].
     """
     counts = problem_counts(records)
-    common = common_subset_stats(records, planners=planners)
+    summary = summary or summarize_run(records, planners=planners)
+    common = summary.common
     out: dict[str, Any] = {
         "format_version": SUMMARY_FORMAT_VERSION,
         "distinct_problems": counts["distinct"],
@@ -74,8 +76,8 @@ def summary_json(
         "metrics": {m: SUMMARY_METRICS[m] for m in SUMMARY_METRICS},
         "planners": {},
     }
-    split = {by: summarize(records, by=by, planners=planners) for by in ("problem", "variant")}
-    for g in summarize(records, planners=planners):
+    split = {"problem": summary.by_kind, "variant": summary.by_family}
+    for g in summary.overall:
         p = g.planner
         out["planners"][p] = {
             "success": _success_json(g),
@@ -155,7 +157,9 @@ def write_summary(
     pairs = paired_comparisons(records, rng=np.random.default_rng(seed), planners=planners)
     md_path, csv_path, paired_path = run_dir / "summary.md", run_dir / "summary.csv", run_dir / "paired.csv"
     json_path = run_dir / "summary.json"
-    md = summary_markdown(records, pairs=pairs, planners=planners, title=title or f"Run summary: {run_dir.name}")
+    summary = summarize_run(records, planners=planners)
+    md = summary_markdown(records, pairs=pairs, planners=planners, title=title or f"Run summary: {run_dir.name}",
+                          summary=summary)
     if budget_records:
         from suite.report.budgets import budget_table
 
@@ -166,14 +170,9 @@ def write_summary(
     if executions:
         md += "\n" + EXECUTION_INTRO + "\n" + execution_table(executions, planners=planners) + "\n"
     md_path.write_text(md, encoding="utf-8")
-    json_path.write_text(json.dumps(summary_json(records, pairs=pairs, planners=planners), indent=1) + "\n",
-                         encoding="utf-8")
-    groups = [
-        *summarize(records, planners=planners),
-        *summarize(records, by="problem", planners=planners),
-        *summarize(records, by="variant", planners=planners),
-    ]
-    _write_csv(csv_path, *_csv_rows(groups))
+    json_path.write_text(json.dumps(summary_json(records, pairs=pairs, planners=planners, summary=summary), indent=1)
+                         + "\n", encoding="utf-8")
+    _write_csv(csv_path, *_csv_rows([*summary.overall, *summary.by_kind, *summary.by_family]))
     _write_csv(
         paired_path,
         ["metric", "planner_a", "planner_b", "n", "scenes", "median_diff", "ci95_low", "ci95_high", "wilcoxon_p"],

@@ -176,6 +176,26 @@ def summarize(
     return out
 
 
+@dataclasses.dataclass(frozen=True)
+class RunSummary:
+    """Every group statistic the summary files show, computed once: per planner over all problems,
+    per problem kind and per scene family, and the common subset (see `common_subset_stats`)."""
+
+    overall: list[GroupSummary]
+    by_kind: list[GroupSummary]
+    by_family: list[GroupSummary]
+    common: dict[str, dict[str, MetricStats]]
+
+
+def summarize_run(records: Sequence[dict[str, Any]], *, planners: Sequence[str]) -> RunSummary:
+    return RunSummary(
+        overall=summarize(records, planners=planners),
+        by_kind=summarize(records, by="problem", planners=planners),
+        by_family=summarize(records, by="variant", planners=planners),
+        common=common_subset_stats(records, planners=planners),
+    )
+
+
 def common_subset_stats(
     records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None,
     metrics: Sequence[str] = tuple(SUMMARY_METRICS),

@@ -15,8 +15,9 @@ from suite.report.summary_stats import (
     GroupSummary,
     MetricStats,
     PairedComparison,
-    common_subset_stats,
+    RunSummary,
     summarize,
+    summarize_run,
 )
 from suite.run.records import SUCCESS, planners_in, problem_counts, statuses_in
 
@@ -63,8 +64,7 @@ def _rows(groups: Sequence[GroupSummary], *, key: str | None) -> tuple[list[str]
     return headers, rows
 
 
-def _common_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[str]]]:
-    stats = common_subset_stats(records, planners=planners)
+def _common_rows(stats: dict[str, dict[str, MetricStats]], planners: Sequence[str]) -> tuple[list[str], list[list[str]]]:
     headers = ["metric (common subset)", "n"] + list(planners)
     rows = []
     for m, label in SUMMARY_METRICS.items():
@@ -122,9 +122,13 @@ def summary_markdown(
     pairs: Sequence[PairedComparison],
     planners: Sequence[str] | None = None,
     title: str = "Run summary",
+    summary: RunSummary | None = None,
 ) -> str:
-    """summary.md: per-planner, per-kind (and per-variant) tables, failures and paired comparisons."""
+    """summary.md: per-planner, per-kind (and per-variant) tables, failures and paired comparisons.
+
+    `summary` is the run's `summarize_run` when the caller has it (default: computed here)."""
     planners = list(planners) if planners is not None else planners_in(records)
+    summary = summary or summarize_run(records, planners=planners)
     md = [
         f"# {title}",
         "",
@@ -139,21 +143,20 @@ def summary_markdown(
         "## Per planner",
         "",
     ]
-    md.append(tabulate(*reversed(_rows(summarize(records, planners=planners), key=None)), tablefmt="github"))
+    md.append(tabulate(*reversed(_rows(summary.overall, key=None)), tablefmt="github"))
     if len(planners) > 1:
         md += ["", "## On the problems every planner solved", "",
                "Medians over the distinct problems that every planner solved (n of them per metric): "
                "no planner is flattered by skipping the hard ones.", ""]
-        md.append(tabulate(*reversed(_common_rows(records, planners)), tablefmt="github"))
+        md.append(tabulate(*reversed(_common_rows(summary.common, planners)), tablefmt="github"))
     md += ["", "## Failures by status (trials)", ""]
-    groups = summarize(records, planners=planners)
-    md.append(tabulate(*reversed(_failure_rows(groups, statuses_in(records))), tablefmt="github"))
+    md.append(tabulate(*reversed(_failure_rows(summary.overall, statuses_in(records))), tablefmt="github"))
     md += ["", "## Per planner and problem kind", ""]
-    md.append(tabulate(*reversed(_rows(summarize(records, by="problem", planners=planners), key="problem")), tablefmt="github"))
+    md.append(tabulate(*reversed(_rows(summary.by_kind, key="problem")), tablefmt="github"))
     if len({r["variant"] for r in records}) > 1:
         md += ["", "## Per planner and scene family", ""]
         md.append(
-            tabulate(*reversed(_rows(summarize(records, by="variant", planners=planners), key="variant")), tablefmt="github")
+            tabulate(*reversed(_rows(summary.by_family, key="variant")), tablefmt="github")
         )
     md += [
         "",
