@@ -164,6 +164,13 @@ PROGRESS_SLICES = 20
 MIN_SLICE_S = 0.01
 
 
+def _progress_point(op, t_solve: float) -> list:
+    """[time since the solve started (s), the best solution's cost, or None before the first one]."""
+    cost = (float(og.PathGeometric(op.pdef.getSolutionPath()).cost(op.objective).value())
+            if op.pdef.hasExactSolution() else None)
+    return [round(time.perf_counter() - t_solve, 6), cost]
+
+
 class _OmplPlanner:
     """One OMPL geometric planner on the problem's python-fcl world (see the module docstring)."""
 
@@ -248,9 +255,7 @@ class _OmplPlanner:
             status = op.planner.solve(ob.timedPlannerTerminationCondition(slice_s))
             quick = time.perf_counter() - t_slice < 0.1 * slice_s  # it stopped on its own
             if len(progress) < MAX_PROGRESS_POINTS:  # every slice, as OMPL samples at a fixed period
-                cost = (float(og.PathGeometric(op.pdef.getSolutionPath()).cost(op.objective).value())
-                        if op.pdef.hasExactSolution() else None)  # None: no solution yet
-                progress.append([round(time.perf_counter() - t_solve, 6), cost])
+                progress.append(_progress_point(op, t_solve))
             T = ob.PlannerStatus.PlannerStatusType
             if status.getStatus() not in (T.EXACT_SOLUTION, T.APPROXIMATE_SOLUTION, T.TIMEOUT):
                 return status  # stopped on its own (no solution possible, a crash)
@@ -269,7 +274,7 @@ class _OmplPlanner:
         op.attach(self._make(op.si))
         stats: dict[str, Any] = {"solver": self.solver, "resolution_rad": resolution_rad}
         path = simplifier = None
-        progress: list[list[float]] = []  # (time in the solve, best cost) at each improvement
+        progress: list[list] = []  # optimizing planners: [time in the solve, best cost or None] points
         try:
             t_solve = time.perf_counter()
             if self.optimizing and self.resumable:
@@ -277,9 +282,7 @@ class _OmplPlanner:
                 stats["progress"] = progress
             elif self.optimizing:  # one solve: its progress is the end point only
                 status = op.planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
-                progress.append([round(time.perf_counter() - t_solve, 6), (
-                    float(og.PathGeometric(op.pdef.getSolutionPath()).cost(op.objective).value())
-                    if op.pdef.hasExactSolution() else None)])
+                progress.append(_progress_point(op, t_solve))
                 stats["progress"] = progress
             else:
                 status = op.planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
