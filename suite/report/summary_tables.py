@@ -22,7 +22,7 @@ from suite.report.summary_stats import (
 from suite.run.records import SUCCESS, planners_in, problem_counts, statuses_in
 
 #: The success-aware time column: every problem counts, a failure at its budget.
-TIME_TO_SOLVE = "time to solve, failures at budget (s)"
+TIME_TO_SOLVE_LABEL = "time to solve, failures at budget (s)"
 
 
 def format_number(v: float) -> str:
@@ -55,7 +55,7 @@ def _rate(g: GroupSummary) -> str:
 
 
 def _rows(groups: Sequence[GroupSummary], *, key: str | None) -> tuple[list[str], list[list[str]]]:
-    headers = (["planner"] + ([{"variant": "family"}.get(key, key)] if key else []) + ["success (95% CI)", TIME_TO_SOLVE]
+    headers = (["planner"] + ([{"variant": "family"}.get(key, key)] if key else []) + ["success (95% CI)", TIME_TO_SOLVE_LABEL]
                + list(SUMMARY_METRICS.values()))
     rows = []
     for g in groups:
