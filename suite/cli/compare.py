@@ -144,9 +144,9 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     values["planners"] = tuple(parse_planner_list(str(planners)))
     if args.planners is not None:
         given["planners"] = ("--planners", values["planners"])
-    if getattr(args, "budgets", None) and args.time_limit_s is not None:
+    if args.budgets and args.time_limit_s is not None:
         raise SuiteError("--budgets sets the planning budgets; --time-limit-s sets one: use one or the other")
-    if getattr(args, "budgets", None) and (args.execute or args.reperceive):
+    if args.budgets and (args.execute or args.reperceive):
         raise SuiteError("--execute runs one plan per problem; with --budgets there is one per budget: run them apart")
     if args.resume and args.out:
         values = _resumed_settings(Path(args.out), values, given)
