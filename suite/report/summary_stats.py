@@ -214,20 +214,6 @@ def common_subset_stats(
     return out
 
 
-def bootstrap_median_ci(
-    diffs: np.ndarray, *, rng: np.random.Generator, n_resamples: int = N_RESAMPLES, level: float = 0.95
-) -> tuple[float, float]:
-    """Percentile-bootstrap confidence interval of the median of `diffs` (NaNs if fewer than 2)."""
-    diffs = np.asarray(diffs, dtype=float)
-    if len(diffs) < 2:
-        return math.nan, math.nan
-    idx = rng.integers(0, len(diffs), size=(n_resamples, len(diffs)))
-    medians = np.median(diffs[idx], axis=1)
-    alpha = (1.0 - level) / 2
-    lo, hi = np.percentile(medians, [100 * alpha, 100 * (1 - alpha)])
-    return float(lo), float(hi)
-
-
 def wilcoxon_p(diffs: np.ndarray) -> float:
     """Two-sided Wilcoxon signed-rank p-value of paired differences.
 

@@ -12,7 +12,8 @@ import pytest
 from scenes.errors import SuiteError
 from suite.run.records import metric, planners_in, problem_key, read_trials
 from suite.report.summary import write_summary
-from suite.report.summary_stats import bootstrap_median_ci, paired_comparisons, summarize, wilcoxon_p
+from suite.report.outcomes import cluster_bootstrap_median_ci
+from suite.report.summary_stats import paired_comparisons, summarize, wilcoxon_p
 from suite.report.summary_tables import summary_table
 
 Q0 = np.array([-1.57, 0.1, 0.0, -1.2, 0.0, 1.6, 0.0])
@@ -166,9 +167,10 @@ def test_paired_comparison_known_example():
 def test_paired_small_and_degenerate_cases():
     assert math.isnan(wilcoxon_p(np.array([0.3])))
     assert wilcoxon_p(np.zeros(5)) == 1.0
-    lo, hi = bootstrap_median_ci(np.array([0.3]), rng=np.random.default_rng(1))
+    lo, hi = cluster_bootstrap_median_ci(np.array([0.3]), ["a"], rng=np.random.default_rng(1), n_resamples=100)
     assert math.isnan(lo) and math.isnan(hi)
-    lo, hi = bootstrap_median_ci(np.full(4, 0.25), rng=np.random.default_rng(1))
+    lo, hi = cluster_bootstrap_median_ci(np.full(4, 0.25), list("abcd"), rng=np.random.default_rng(1),
+                                         n_resamples=100)
     assert lo == hi == pytest.approx(0.25)
     # no problem solved by both: n = 0, everything n/a
     recs = [record("ik", can=0, length_rad=1.0), record("rrt", can=0, status="timeout")]
