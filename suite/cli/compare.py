@@ -27,9 +27,10 @@ HOW_IT_RUNS = ("jobs", "executor", "scheduler", "memory_limit_mb")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     d = CompareConfig()
     p.add_argument("--planners", default=None, help=f"comma-separated planner names (default {','.join(d.planners)})")
-    p.add_argument("--dataset", default=None, metavar="NAME[:TIER]",
-                   help=f"run a frozen dataset's stored problems (default {d.dataset}; the scene flags below "
-                        "select generated scenes instead)")
+    p.add_argument("--dataset", default=None, metavar="NAME[:TIER[:FILTERS]]",
+                   help=f"run a frozen dataset's stored problems (default {d.dataset}); TIER may be a split (tune, "
+                        "test); FILTERS keep some families or kinds, e.g. recycle-v1:test:family=wall,kind=transit "
+                        "(the scene flags below select generated scenes instead)")
     p.add_argument("--variant", default=None, help=f"generated scenes of this variant or family (default {d.variant})")
     p.add_argument("--seed", type=nonneg_int, default=None,
                    help=f"run seed, and first scene seed of generated scenes (default {d.seed})")
@@ -158,12 +159,14 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     config = _validated(values, source=source)
     _check_planner_configs(config, source=source)
     if config.dataset:
-        from suite.problems.dataset import dataset_dir, parse_dataset_arg, read_manifest
+        from suite.problems.dataset import dataset_dir, dataset_filters, parse_dataset_arg, read_manifest
 
         name, tier = parse_dataset_arg(config.dataset)
-        tiers = ["all", *sorted(read_manifest(dataset_dir(name)).get("tiers", {}))]
+        manifest = read_manifest(dataset_dir(name))
+        tiers = ["all", *sorted(manifest.get("tiers", {})), *sorted(manifest.get("splits", {}))]
         if tier not in tiers:
-            raise SuiteError(f"dataset {name!r} has no tier {tier!r}; allowed: {tiers}")
+            raise SuiteError(f"dataset {name!r} has no tier or split {tier!r}; allowed: {tiers}")
+        dataset_filters(config.dataset)  # a malformed filter fails here, before the run starts
     else:
         variants = available_variants(config.spec)
         if config.variant not in variants:

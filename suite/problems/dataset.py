@@ -118,10 +118,37 @@ def dataset_dir(name: str) -> Path:
     return DATASETS_DIR / name
 
 
+#: Fields a dataset selection may filter on (`NAME:TIER:family=wall+window,kind=transit`).
+FILTER_FIELDS = ("family", "kind")
+
+
 def parse_dataset_arg(text: str) -> tuple[str, str]:
-    """`NAME[:TIER]` -> (name, tier); the tier defaults to the whole dataset."""
-    name, _, tier = text.partition(":")
+    """`NAME[:TIER[:FILTERS]]` -> (name, tier); the tier defaults to the whole dataset."""
+    name, _, rest = text.partition(":")
+    tier = rest.partition(":")[0]
     return name, tier or ALL
+
+
+def dataset_filters(text: str) -> dict[str, frozenset[str]]:
+    """The filters of `NAME:TIER:FIELD=V1+V2,FIELD=...` as {field: allowed values}; {} without any.
+
+    Raises:
+        SuiteError: a filter that is not FIELD=VALUES with FIELD in FILTER_FIELDS.
+    """
+    spec = text.partition(":")[2].partition(":")[2]
+    out: dict[str, frozenset[str]] = {}
+    if not spec:
+        return out
+    for part in spec.split(","):
+        field, eq, values = part.partition("=")
+        vals = frozenset(v for v in values.split("+") if v)
+        if field not in FILTER_FIELDS or not eq or not vals:
+            raise SuiteError(f"dataset filter {part!r} in {text!r}: use FIELD=V1+V2 with FIELD one of "
+                             f"{', '.join(FILTER_FIELDS)} (e.g. {text.split(':')[0]}:test:family=wall,kind=transit)")
+        if field in out:
+            raise SuiteError(f"dataset filter {field!r} given twice in {text!r}: list its values as V1+V2")
+        out[field] = vals
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -218,6 +245,7 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
         SuiteError: an unknown dataset or tier, or a file that does not parse.
     """
     name, tier = parse_dataset_arg(text)
+    filters = dataset_filters(text)
     directory = dataset_dir(name)
     manifest = read_manifest(directory)
     tiers = manifest.get("tiers", {})
@@ -230,6 +258,7 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
     scenes = {rec["scene_key"]: rec for _, _, rec in _read_jsonl(directory / SCENES_FILE)}
     built: dict[str, Scene] = {}
     ids, problems, meta, refs, steps = [], [], {}, {}, {}
+    seen: dict[str, set[str]] = {field: set() for field in filters}  # every value of a filtered field
     removed_before: dict[str, dict[int, int]] = {}  # scene -> can -> how many cans were picked before it
     for lineno, _, rec in _read_jsonl(directory / PROBLEMS_FILE):
         pid = rec.get("problem_id")
@@ -239,7 +268,11 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
         if not rec.get("benchmark", True):
             steps[(rec["scene_key"], int(rec["can_id"]), rec["kind"])] = (rec["q_start"], rec["q_goal"])
             continue
+        for field in filters:
+            seen[field].add(str(rec.get(field)))
         if (wanted is not None and pid not in wanted) or (split is not None and rec.get("split") != split):
+            continue
+        if any(str(rec.get(field)) not in allowed for field, allowed in filters.items()):
             continue
         key = rec.get("scene_key")
         if key not in scenes:
@@ -257,6 +290,12 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
         problems.append(problem)
         meta[pid] = {"problem_id": pid, **{k: rec.get(k) for k in META_FIELDS}}
         refs[pid] = ref
+    for field, allowed in filters.items():
+        unknown = sorted(allowed - seen[field])
+        if unknown:
+            raise SuiteError(f"dataset {name!r} has no {field} {unknown[0]!r}; allowed: {sorted(seen[field])}")
+    if filters and not ids:
+        raise SuiteError(f"{text!r} selects no problem of dataset {name!r} (tier or split {tier!r})")
     orders = {key: tuple(sorted(cans, key=lambda c: (cans[c], c))) for key, cans in removed_before.items()}
     return Dataset(name, manifest["hash"], tier, manifest, tuple(ids), tuple(problems), meta, refs, steps, orders)
 

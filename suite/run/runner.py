@@ -255,10 +255,13 @@ def write_manifest(out: Path, config: CompareConfig, *, argv: list[str]) -> None
 
     dataset = None
     if config.dataset:
-        from suite.problems.dataset import dataset_dir, parse_dataset_arg, read_manifest
+        from suite.problems.dataset import dataset_dir, dataset_filters, parse_dataset_arg, read_manifest
 
         name, tier = parse_dataset_arg(config.dataset)
         dataset = {"name": name, "tier": tier, "hash": read_manifest(dataset_dir(name))["hash"]}
+        filters = dataset_filters(config.dataset)
+        if filters:
+            dataset["filters"] = {field: sorted(values) for field, values in filters.items()}
     from suite.run.formats import MANIFEST_FORMAT_VERSION
 
     manifest = {

@@ -103,6 +103,25 @@ def test_unknown_dataset_and_tier_are_one_line(small):
         load_dataset("no-such-dataset")
 
 
+def test_filters_keep_the_named_families_and_kinds(small):
+    d, _ = small
+    full = load_dataset(str(d))
+    kinds = {m["kind"] for m in full.meta.values()}
+    assert len(kinds) > 1
+    kind = sorted(kinds)[0]
+    sel = load_dataset(f"{d}:all:kind={kind}")
+    assert list(sel.ids) == [pid for pid in full.ids if full.meta[pid]["kind"] == kind]
+    both = load_dataset(f"{d}:all:family=wall,kind={'+'.join(sorted(kinds))}")
+    assert both.ids == full.ids
+    assert sel.picking_orders == full.picking_orders  # every stored cycle step still counts
+    with pytest.raises(SuiteError, match=r"has no family 'window'; allowed: \['wall'\]"):
+        load_dataset(f"{d}:all:family=window")
+    with pytest.raises(SuiteError, match=r"dataset filter 'colour=red' .* FIELD one of family, kind"):
+        load_dataset(f"{d}:test:colour=red")
+    with pytest.raises(SuiteError, match=r"'family' given twice"):
+        load_dataset(f"{d}:all:family=wall,family=wall")
+
+
 def compare(*args):
     return subprocess.run([sys.executable, "-m", "suite", "compare", *args], capture_output=True, text=True,
                           cwd=ROOT, timeout=240)
