@@ -274,7 +274,7 @@ def find_cached(whash: str, cache_dir: str | Path | None) -> Path | None:
 
 
 @contextlib.contextmanager
-def _quiet_drake():
+def quiet_drake():
     """IrisNp2 logs a warning for every closest-collision program SNOPT fails to solve (a
     routine event it handles); keep them out of the run's output."""
     logger = logging.getLogger("drake")
@@ -352,7 +352,7 @@ class RegionBuilder:
                 containment = None if contain is None else np.column_stack([q, contain])
                 t0 = time.perf_counter()
                 try:
-                    with _quiet_drake():
+                    with quiet_drake():
                         region = fn(checker, Hyperellipsoid.MakeHypersphere(o.seed_radius_rad, q), self.domain,
                                     self._iris_options(containment))
                 except RuntimeError as exc:  # IRIS refuses (e.g. a containment point in collision)
@@ -537,7 +537,7 @@ def grow_for_problem(rs: RegionSet, problem, builder: RegionBuilder) -> int:
 
 
 def regions_for(problem, options: RegionOptions, *, cache_dir: str | Path | None = None,
-                build: bool = True) -> tuple[RegionSet | None, dict]:
+                build: bool = True, fresh: bool = False) -> tuple[RegionSet | None, dict]:
     """The cached region set of the problem's world, grown for this problem if needed.
 
     Args:
@@ -545,13 +545,15 @@ def regions_for(problem, options: RegionOptions, *, cache_dir: str | Path | None
         options: how regions are grown.
         cache_dir: where on-demand builds are written (and first looked up); None for the default.
         build: grow regions on a miss; otherwise the cached set (if any) is returned as it is.
+        fresh: ignore every cached set and grow the world's regions from nothing (written to
+            `cache_dir`, replacing what is there).
 
     Returns:
         (region set or None, info) with info: world_hash, cache ("hit", "grown", "built",
         "miss"), regions_added, path.
     """
     whash = world_hash(problem, options)
-    path = find_cached(whash, cache_dir)
+    path = None if fresh else find_cached(whash, cache_dir)
     rs = RegionSet.load(path) if path is not None else None
     info = {"world_hash": whash, "regions_added": 0, "path": None if path is None else str(path)}
     pkey = problem_hash(problem)
@@ -564,7 +566,7 @@ def regions_for(problem, options: RegionOptions, *, cache_dir: str | Path | None
     info["cache"] = "grown" if rs is not None else "built"
     if rs is None:
         rs = RegionSet(whash, iris=options.iris)
-    with _quiet_drake():
+    with quiet_drake():
         info["regions_added"] = grow_for_problem(rs, problem, RegionBuilder(problem, options))
     if path is None:
         path = (Path(cache_dir) if cache_dir else DEFAULT_CACHE_DIR) / f"{whash}.npz"

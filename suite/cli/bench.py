@@ -13,6 +13,7 @@ TARGETS = {
     "compare": "suite.bench.compare",
     "execution": "suite.bench.execution",
     "dataset": "suite.bench.dataset",
+    "regions": "suite.bench.regions",
 }
 
 

@@ -35,18 +35,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b.add_argument("--executor", choices=("local", "dask"), default="local", help="where jobs run (default local)")
     b.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://HOST:PORT (with --executor dask)")
     b.add_argument("--limit", type=positive_int, default=None, help="build only the first K worlds")
+    b.add_argument("--rebuild", action="store_true",
+                   help="grow every world from nothing, ignoring cached regions (e.g. to re-measure the offline "
+                        "cost on a quiet machine, or after changing how regions grow)")
 
 
 def _build_world(payload: tuple) -> dict:
     """Worker: grow one world's regions for each of its problems (in this process)."""
-    problems, options, out = payload
+    problems, options, out, rebuild = payload
     from planners.gcs_regions import RegionSet, regions_for
 
     t0 = time.perf_counter()
     infos = []
     rs: RegionSet | None = None
-    for problem in problems:
-        rs, info = regions_for(problem, options, cache_dir=out, build=True)
+    for i, problem in enumerate(problems):
+        rs, info = regions_for(problem, options, cache_dir=out, build=True, fresh=rebuild and i == 0)
         infos.append(info)
     connected = [bool(rs.connected(p.q_start, p.q_goal)) for p in problems] if rs is not None else []
     stored = None if rs is None else {
@@ -97,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         executor = DaskExecutor(scheduler=args.scheduler, n_workers=args.jobs)
     else:
         executor = LocalExecutor(jobs=args.jobs)
-    jobs = [Job(world_hash(ps[0], options), _build_world, (ps, options, str(out)), HARD_LIMIT_S) for ps in items]
+    jobs = [Job(world_hash(ps[0], options), _build_world, (ps, options, str(out), args.rebuild), HARD_LIMIT_S) for ps in items]
     from suite.run.interrupt import Interrupted, SignalGuard
     from suite.run.lock import LOCK_FILE, RunLock
 
@@ -123,7 +126,7 @@ def _build_all(executor, jobs, items, out: Path, rows: list[dict], args, options
             _record_world(k, outcome, items, out, rows)
     finally:
         outcomes.close()  # an error or a signal stops the workers at once
-    return _write_summary(rows, out, args, options, wall=time.perf_counter() - t0)
+    return _write_summary(rows, out, args, options, wall=time.perf_counter() - t0, items=items)
 
 
 def _record_world(k: int, outcome, items, out: Path, rows: list[dict]) -> None:
@@ -148,7 +151,7 @@ def _record_world(k: int, outcome, items, out: Path, rows: list[dict]) -> None:
           f"({'/'.join(row['cache'])})", flush=True)
 
 
-def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float) -> int:
+def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, items: list) -> int:
     built = [r for r in rows if any(c != "hit" for c in r["cache"])]
     per_region = [s for r in rows for s in r["region_build_s"]]
     summary = {
@@ -156,14 +159,19 @@ def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float) -
         "worlds_built_now": len(built), "wall_s": wall,
         "problems": sum(r["problems"] for r in rows), "connected": sum(r["connected"] for r in rows),
         "offline_s_median": statistics.median(r["offline_s"] for r in rows) if rows else None,
+        "offline_s_max": max(r["offline_s"] for r in rows) if rows else None,
         "regions_median": statistics.median(r["regions"] for r in rows) if rows else None,
         "region_iris_s_median": statistics.median(per_region) if per_region else None,
         "size_bytes": sum(f.stat().st_size for f in out.glob("*.npz")),
         "worlds_detail": rows,
     }
     (out / "build.json").write_text(json.dumps(summary, indent=1))
+    if not rows:
+        print(f"no world was built: each of the {len(items)} failed (see above)", file=sys.stderr)
+        return 1
     print(f"{summary['worlds']} worlds ({len(built)} built now) in {wall:.0f} s wall; median per world: "
-          f"{summary['offline_s_median']:.1f} s offline, {summary['regions_median']} regions; median IRIS "
+          f"{summary['offline_s_median']:.1f} s offline (max {summary['offline_s_max']:.1f} s), "
+          f"{summary['regions_median']} regions; median IRIS "
           f"call {summary['region_iris_s_median'] or 0:.2f} s; start and goal connected for "
           f"{summary['connected']}/{summary['problems']} problems; cache {summary['size_bytes'] / 1e6:.2f} MB",
           file=sys.stdout)

@@ -137,4 +137,6 @@ def test_regions_build_cli_builds_once_per_world(tmp_path, capsys):
     capsys.readouterr()
     assert main(argv) == 0  # the second build finds the world built and verified
     assert "(0 built now)" in capsys.readouterr().out
+    assert main([*argv, "--rebuild"]) == 0  # --rebuild grows it again from nothing
+    assert "(1 built now)" in capsys.readouterr().out
     assert main(["regions", "build", "--dataset", "recycle-v1:quick", "--scheduler", "tcp://h:1"]) == 2
