@@ -75,6 +75,32 @@ def _candidate_dir(out: Path, settings: dict) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
+    import multiprocessing
+
+    from suite.run.interrupt import Interrupted, SignalGuard, reap_children
+    from suite.run.lock import RunLock
+
+    from planners.registry import planner_class
+
+    planner_class(args.planner)  # an unknown planner, or one without a search, fails before anything is written
+    grid(args.planner)
+    out = Path(args.out or Path("results") / "tune" / args.planner)
+    before = frozenset(c.pid for c in multiprocessing.active_children())
+    with SignalGuard():
+        lock = RunLock(out, what="tuning").acquire()  # one tuning per directory: candidates share it
+        try:
+            return _tune(args, out)
+        except Interrupted as exc:
+            print(f"interrupted by {exc.name}: the candidates' trials recorded in {out} are kept and "
+                  f"{'planners/configs/' + args.planner + '.yaml was not written' if args.write else 'nothing was chosen'}; "
+                  "run the same command again to carry on", file=sys.stderr)
+            return exc.exit_code
+        finally:
+            reap_children(keep=before)
+            lock.release()
+
+
+def _tune(args: argparse.Namespace, out: Path) -> int:
     from planners.registry import planner_class
     from planners.tuned import OBJECTIVE, config_path
     from suite.report.tuning import choose, evaluate, table_rows, weak_families
@@ -85,7 +111,6 @@ def run(args: argparse.Namespace) -> int:
     cls = planner_class(args.planner)
     candidates = grid(args.planner)
     ds, problems = tuning_problems(args.dataset, per_family=args.per_family, time_limit_s=args.time_limit_s)
-    out = Path(args.out or Path("results") / "tune" / args.planner)
     print(f"tuning {args.planner}: {len(candidates)} candidates x {len(problems)} non-trivial problems of "
           f"{ds.name}'s tune split ({args.time_limit_s:g} s each) into {out}", file=sys.stderr)
     evaluated = []

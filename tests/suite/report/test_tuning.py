@@ -100,3 +100,18 @@ def test_tuning_sample_is_non_trivial_tune_split_problems_per_family():
     assert all(families.count(f) <= 2 for f in set(families)) and len(set(families)) >= 5
     test_ids = set(__import__("suite.problems.dataset", fromlist=["x"]).load_dataset("recycle-v1:quick").ids)
     assert not test_ids & {m["problem_id"] for m in metas}  # the quick tier (test split) is never tuned on
+
+
+def test_a_tuning_directory_in_use_is_refused_in_one_line(tmp_path, capsys):
+    from suite.cli import main
+    from suite.run.lock import RunLock
+
+    held = RunLock(tmp_path / "tune-rrt", what="tuning").acquire()
+    try:
+        assert main(["tune", "--planner", "rrt", "--out", str(tmp_path / "tune-rrt"), "--no-progress"]) == 2
+    finally:
+        held.release()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is in use by another tuning" in err[0]
+    assert main(["tune", "--planner", "nope", "--out", str(tmp_path / "never")]) == 2
+    assert not (tmp_path / "never").exists()  # a bad planner fails before anything is written
