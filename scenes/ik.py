@@ -68,18 +68,19 @@ class PoseIk:
         far = [rng.uniform(self.lower, self.upper) for _ in range(options.restarts)]
         seeds = [q0] + near + far
         n_near = 1 + len(near)
+        # One program for all seeds: only the initial guess changes between the solves.
+        ik = InverseKinematics(self.plant, self.plant_context)
+        q = ik.q()
+        tol = np.full(3, options.position_tolerance_m)
+        ik.AddPositionConstraint(self.G, np.zeros(3), self.plant.world_frame(),
+                                 X.translation() - tol, X.translation() + tol)
+        ik.AddOrientationConstraint(self.G, RotationMatrix(), self.plant.world_frame(),
+                                    X.rotation(), options.orientation_tolerance_rad)
+        ik.AddMinimumDistanceLowerBoundConstraint(options.min_distance_m,
+                                                  options.influence_distance_m)
+        prog = ik.get_mutable_prog()
+        prog.AddQuadraticErrorCost(np.eye(7), np.asarray(q_seed, float), q)
         for i, seed in enumerate(seeds):
-            ik = InverseKinematics(self.plant, self.plant_context)
-            q = ik.q()
-            tol = np.full(3, options.position_tolerance_m)
-            ik.AddPositionConstraint(self.G, np.zeros(3), self.plant.world_frame(),
-                                     X.translation() - tol, X.translation() + tol)
-            ik.AddOrientationConstraint(self.G, RotationMatrix(), self.plant.world_frame(),
-                                        X.rotation(), options.orientation_tolerance_rad)
-            ik.AddMinimumDistanceLowerBoundConstraint(options.min_distance_m,
-                                                      options.influence_distance_m)
-            prog = ik.get_mutable_prog()
-            prog.AddQuadraticErrorCost(np.eye(7), np.asarray(q_seed, float), q)
             prog.SetInitialGuess(q, seed)
             result = self.solver.Solve(prog, None, solver_options)
             if result.is_success():

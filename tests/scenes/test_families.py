@@ -131,3 +131,106 @@ def test_unknown_range_field_is_named():
     text = DEFAULT_SPEC_PATH.read_text().replace("wall_probability: 0.5", "wall_probability: 0.5\n      wall_colour: 3")
     with pytest.raises(SuiteError, match=r"families\.station\.ranges\.wall_colour' is unknown"):
         loads_spec(text, variant="station")
+
+
+def _clutter_with(**ranges):
+    import dataclasses
+
+    spec = load_spec(variant="clutter")
+    return dataclasses.replace(spec, family=dataclasses.replace(spec.family, **ranges))
+
+
+def test_sometimes_infeasible_range_is_redrawn_deterministically(caplog):
+    # gaps above ~0.18 m leave no room for 3 cans on the clutter plate: such draws are drawn again
+    spec = _clutter_with(cans=(3, 3), min_gap_m=(0.0, 0.4))
+    redrawn = []
+    for seed in range(3):
+        caplog.clear()
+        with caplog.at_level("DEBUG", logger="scenes.generate"):
+            scene = generate_scene(spec, seed=seed)
+        assert len(scene.cans) == 3 and scene.spec.cans.min_gap_m <= 0.4
+        if any("drawn again" in r.getMessage() for r in caplog.records):
+            redrawn.append(scene)
+    assert redrawn  # the range is sometimes infeasible, and those seeds still give a scene
+    assert generate_scene(spec, seed=redrawn[0].seed).key() == redrawn[0].key()  # same seed, same scene
+
+
+def test_always_infeasible_range_fails_after_bounded_redraws_in_one_line():
+    spec = _clutter_with(cans=(3, 3), min_gap_m=(0.3, 0.4))
+    with pytest.raises(SuiteError, match=r"clutter seed 0: none of \d+ drawn stations .*families\.clutter\.ranges") as exc:
+        generate_scene(spec, seed=0)
+    assert "\n" not in str(exc.value)
+
+
+def test_placement_shortcuts_give_the_plain_answers():
+    # bounding-box culling and scalar footprint bounds decide exactly as plain FCL queries on
+    # every candidate (cans near the distractors included)
+    import fcl
+
+    from scenes.fcl_shapes import fcl_geometry
+    from scenes.generate import (_clear_of_extras, _far_enough, _footprint_bounds, _footprint_corners,
+                                 _footprint_distance, _gripper_clear, _gripper_parts, _sample_can)
+    from scenes.grasp_rule import truth_grasp
+    from scenes.scene import Scene
+
+    spec = family_scene("clutter", 4245).spec
+    r, h = spec.can.radius_m, spec.can.height_m
+
+    def obj(kind, dims, X):
+        return fcl.CollisionObject(fcl_geometry(kind, dims), fcl.Transform(X[:3, :3], X[:3, 3]))
+
+    def plain_clear_of_extras_in(can, spec):
+        req = fcl.DistanceRequest(enable_signed_distance=True)
+        return all(fcl.distance(obj("cylinder", (r, h), can.X_WC()), obj(o.shape, o.size_m, o.pose()), req,
+                                fcl.DistanceResult()) >= spec.cans.min_gap_m + 1e-4 for o in spec.extra)
+
+    def plain_clear_of_extras(can):
+        return plain_clear_of_extras_in(can, spec)
+
+    def plain_gripper_clear(can, others):
+        g = truth_grasp(Scene(spec, 0, (can,)), can)
+        obstacles = [obj("cylinder", (r, h), o.X_WC()) for o in others]
+        obstacles += [obj(o.shape, o.size_m, o.pose()) for o in spec.extra]
+        for s in np.linspace(0.0, 1.0, 4):
+            X_WG = g.X_WG.copy()
+            X_WG[:3, 3] = (1 - s) * g.X_WG[:3, 3] + s * g.X_WGpre[:3, 3]
+            for kind, dims, X_GS in _gripper_parts(spec.grasp.open_width_m):
+                part = obj(kind, dims, X_WG @ X_GS)
+                if any(fcl.collide(part, o, fcl.CollisionRequest(), fcl.CollisionResult()) for o in obstacles):
+                    return False
+        return True
+
+    rng = np.random.default_rng(7)
+    cans = [c for c in (_sample_can(rng, spec, i, bool(rng.random() < 0.5)) for i in range(400)) if c is not None]
+    outcomes = set()
+    for k, can in enumerate(cans[:150]):
+        pts = _footprint_corners(can, r, h)
+        assert _footprint_bounds(*can.p_WC_m[:2], can.lying, can.axis_yaw_rad, r, h) == (
+            pts[:, 0].min(), pts[:, 0].max(), pts[:, 1].min(), pts[:, 1].max())
+        clear = _clear_of_extras(can, spec)
+        assert clear == plain_clear_of_extras(can)
+        others = cans[k + 1:k + 4]
+        free = _gripper_clear(can, others, spec)
+        assert free == plain_gripper_clear(can, others)
+        outcomes.add((clear, free))
+    assert len(outcomes) >= 3  # both answers of both checks occurred
+    # the footprint bounds against upright prisms, and a board above the plate (shelf)
+    for other in (spec, family_scene("shelf", 4244).spec):
+        answers = [_clear_of_extras(c, other) for c in cans]
+        assert answers == [plain_clear_of_extras_in(c, other) for c in cans]
+        assert 0 < sum(answers) < len(answers)
+    # can pairs: the stadium bounds decide as the circle bounds and the FCL distance do
+    def plain_far_enough(a, b, gap):
+        d = math.dist(a.p_WC_m[:2], b.p_WC_m[:2])
+        if d >= sum(math.hypot(h / 2, r) if c.lying else r for c in (a, b)) + gap:
+            return True
+        return d >= 2 * r + gap and _footprint_distance(a, b, r, h) >= gap
+
+    gaps = {}
+    for a in cans[:60]:
+        for b in cans[60:120]:
+            for gap in (0.0, 0.005, 0.03):
+                far = plain_far_enough(a, b, gap)
+                assert _far_enough(a, b, r, h, gap) == far
+                gaps[far] = gaps.get(far, 0) + 1
+    assert min(gaps.values()) > 100
