@@ -37,22 +37,60 @@ def cut_at_collision(A: np.ndarray, b: np.ndarray, *, world, center: np.ndarray,
         offset = float(n @ c) + max(dist - margin_rad, 0.5 * dist)
         if all(float(n @ q) <= offset for q in keep):
             return np.vstack([A, n]), np.append(b, offset)
-    return A, b
+    return _separating_cut(A, b, world=world, center=np.asarray(center, float), q_bad=q_bad, keep=keep,
+                           margin_rad=margin_rad, resolution_rad=resolution_rad)
+
+
+def _separating_cut(A: np.ndarray, b: np.ndarray, *, world, center: np.ndarray, q_bad: np.ndarray,
+                    keep: list[np.ndarray], margin_rad: float, resolution_rad: float):
+    """The cut of last resort: a face normal to the shortest segment from the convex hull of the
+    center and `keep` to the first collision met going from the center towards `q_bad` (any point
+    outside that hull can be separated from it by such a face), `margin_rad` short of the collision
+    where the hull leaves room. Returns (A, b), unchanged if the collision lies in the hull."""
+    from scipy.optimize import nnls
+
+    dense = world.interpolate(np.stack([center, q_bad]), resolution_rad)
+    k = world.first_collision(dense)
+    x = dense[k] if k > 0 else np.asarray(q_bad, float)
+    P = np.array([center, *keep], float)
+    w = 1e3  # weight of the row that makes the coefficients sum to one
+    lam, _ = nnls(np.vstack([P.T, w * np.ones(len(P))]), np.append(x, w))
+    d = x - lam @ P
+    dist = float(np.linalg.norm(d))
+    if dist < 1e-6:
+        return A, b
+    n = d / dist
+    inner = max(float(n @ p) for p in P)
+    gap = float(n @ x) - inner
+    if gap <= 1e-9:
+        return A, b
+    offset = float(n @ x) - min(margin_rad, 0.5 * gap)
+    return np.vstack([A, n]), np.append(b, offset)
 
 
 def cut_regions(A: list, b: list, edges: list, seeds: list, q_bad: np.ndarray, *, keep: list[np.ndarray],
                 world) -> int:
     """Cut `q_bad` off every region holding it (A, b, edges changed in place), keeping the
-    configurations of `keep` that a region holds. Returns the number of regions cut."""
+    configurations of `keep` that a region holds; if no face keeps them all (the collision lies
+    between them: the region's segment joining them collides), keeping only those no other region
+    holds, so that every configuration of `keep` stays covered. Returns the number of regions cut."""
     from pydrake.geometry.optimization import HPolyhedron
+
+    def holds(i: int, q: np.ndarray) -> bool:
+        return bool(np.all(A[i] @ q <= b[i] + 1e-9))
 
     cuts = 0
     for i in range(len(A)):
-        if not np.all(A[i] @ q_bad <= b[i] + 1e-9):
+        if not holds(i, q_bad):
             continue
-        inside = [q for q in keep if np.all(A[i] @ q <= b[i] + 1e-9)]
-        A2, b2 = cut_at_collision(A[i], b[i], world=world, center=np.asarray(seeds[i], float), q_bad=q_bad,
-                                  keep=inside, margin_rad=0.01)
+        inside = [q for q in keep if holds(i, q)]
+        center = np.asarray(seeds[i], float)
+        A2, b2 = cut_at_collision(A[i], b[i], world=world, center=center, q_bad=q_bad, keep=inside, margin_rad=0.01)
+        if len(b2) == len(b[i]):
+            only_here = [q for q in inside if not any(holds(j, q) for j in range(len(A)) if j != i)]
+            if len(only_here) < len(inside):
+                A2, b2 = cut_at_collision(A[i], b[i], world=world, center=center, q_bad=q_bad, keep=only_here,
+                                          margin_rad=0.01)
         if len(b2) == len(b[i]):
             continue
         cuts += 1

@@ -140,3 +140,37 @@ def test_regions_build_cli_builds_once_per_world(tmp_path, capsys):
     assert main([*argv, "--rebuild"]) == 0  # --rebuild grows it again from nothing
     assert "(1 built now)" in capsys.readouterr().out
     assert main(["regions", "build", "--dataset", "recycle-v1:quick", "--scheduler", "tcp://h:1"]) == 2
+
+
+class _BallWorld:
+    """A 7-D world whose only obstacle is a ball (what cut_regions asks of the python-fcl world)."""
+
+    def __init__(self, center, radius):
+        self.center, self.radius = np.asarray(center, float), radius
+
+    def interpolate(self, path, resolution_rad):
+        from scenes.fcl_world import CollisionWorld
+
+        return CollisionWorld.interpolate(path, resolution_rad)
+
+    def first_collision(self, Q):
+        bad = np.flatnonzero(np.linalg.norm(np.atleast_2d(Q) - self.center, axis=1) < self.radius)
+        return int(bad[0]) if len(bad) else -1
+
+
+def test_a_region_whose_start_goal_segment_collides_is_cut_keeping_both_covered():
+    from planners.gcs_solve import cut_regions
+
+    box = lambda lo, hi: (np.vstack([np.eye(7), -np.eye(7)]), np.concatenate([np.full(7, hi), -np.full(7, lo)]))
+    q0, q1 = np.r_[-1.0, np.zeros(6)], np.r_[1.0, np.zeros(6)]
+    (A0, b0), (A1, b1) = box(-1.5, 1.5), box(0.5, 1.5)  # region 0 holds both ends, region 1 the goal
+    b1 = b1.copy()
+    b1[1:7] = 0.2  # region 1: x in [0.5, 1.5], the other joints in [-0.5, 0.2]: around the goal
+    b1[8:14] = 0.5
+    A, b, edges = [A0, A1], [b0, b1], [(0, 1), (1, 0)]
+    seeds = [np.r_[0.0, 1.0, np.zeros(5)], q1]
+    world = _BallWorld(np.zeros(7), 0.3)  # between start and goal, on region 0's segment
+    assert cut_regions(A, b, edges, seeds, np.zeros(7), keep=[q0, q1], world=world) == 1
+    holds = lambda i, q: bool(np.all(A[i] @ q <= b[i] + 1e-9))
+    assert not holds(0, np.zeros(7)) and holds(0, q0)  # the start, which only it holds, is kept
+    assert holds(1, q1)  # the goal stays covered, by the region that was not cut
