@@ -399,6 +399,15 @@ class AORRTCPlanner(_OmplPlanner):
     graph_stats = False
     resumable = False
 
+    def _attempt(self, problem, world, *, resolution_rad, budget_s, seed):
+        # OMPL 2.0.1's AORRTC reports a failure ("Zero-length path found") when its trees connect
+        # start and goal directly; a free straight motion is that optimal path, checked here first.
+        if world.motion_free(problem.q_start, problem.q_goal, resolution_rad=resolution_rad):
+            Q = np.stack([np.asarray(problem.q_start, float), np.asarray(problem.q_goal, float)])
+            return PlanResult(PlanStatus.SUCCESS, Q, {"solver": self.solver, "resolution_rad": resolution_rad,
+                                                      "direct": True, "progress": []})
+        return super()._attempt(problem, world, resolution_rad=resolution_rad, budget_s=budget_s, seed=seed)
+
     def _make(self, si):
         p = og.AORRTC(si)
         if self.config.range_rad is not None:

@@ -169,3 +169,13 @@ def test_optimizing_planner_records_its_best_cost_over_time(transit):
     assert r.status is not PlanStatus.SUCCESS or costs  # a success had a solution at some slice
     assert all(b <= a + 1e-9 for a, b in zip(costs, costs[1:]))  # the best cost never worsens
     assert "progress" not in make_planner("rrt").plan(transit).stats  # a feasibility planner has none
+
+
+def test_aorrtc_returns_the_free_straight_motion(open_transit):
+    world = collision_world(open_transit)
+    if not world.motion_free(open_transit.q_start, open_transit.q_goal, resolution_rad=0.01):
+        pytest.skip("this open transit is not straight-line free")
+    # OMPL's AORRTC alone reports "Zero-length path found" (a failure) on such a problem.
+    r = make_planner("aorrtc", AORRTCConfig(time_limit_s=0.5)).plan(open_transit)
+    assert r.status is PlanStatus.SUCCESS and r.stats["direct"] is True
+    assert np.array_equal(r.path, np.stack([open_transit.q_start, open_transit.q_goal]))
