@@ -159,14 +159,9 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     config = _validated(values, source=source)
     _check_planner_configs(config, source=source)
     if config.dataset:
-        from suite.problems.dataset import dataset_dir, dataset_filters, parse_dataset_arg, read_manifest
+        from suite.problems.dataset import check_selection
 
-        name, tier = parse_dataset_arg(config.dataset)
-        manifest = read_manifest(dataset_dir(name))
-        tiers = ["all", *sorted(manifest.get("tiers", {})), *sorted(manifest.get("splits", {}))]
-        if tier not in tiers:
-            raise SuiteError(f"dataset {name!r} has no tier or split {tier!r}; allowed: {tiers}")
-        dataset_filters(config.dataset)  # a malformed filter fails here, before the run starts
+        check_selection(config.dataset)  # a bad tier or filter fails here, before the run starts
     else:
         variants = available_variants(config.spec)
         if config.variant not in variants:

@@ -151,6 +151,22 @@ def dataset_filters(text: str) -> dict[str, frozenset[str]]:
     return out
 
 
+def check_tier(name: str, tier: str, manifest: dict[str, Any]) -> None:
+    """Raise a one-line SuiteError unless `tier` is ALL, a tier or a split of the dataset."""
+    tiers, splits = manifest.get("tiers", {}), manifest.get("splits", {})
+    if tier != ALL and tier not in tiers and tier not in splits:
+        raise SuiteError(f"dataset {name!r} has no tier or split {tier!r}; allowed: "
+                         f"{[ALL, *sorted(tiers), *sorted(s for s in splits if s not in tiers)]}")
+
+
+def check_selection(text: str) -> None:
+    """Check `NAME[:TIER[:FILTERS]]` without loading its problems: the dataset exists, the tier or
+    split is one of its own and the filters parse (their values are checked when it is loaded)."""
+    name, tier = parse_dataset_arg(text)
+    check_tier(name, tier, read_manifest(dataset_dir(name)))
+    dataset_filters(text)
+
+
 @dataclasses.dataclass(frozen=True)
 class Dataset:
     """A loaded dataset (or one tier of it).
@@ -248,11 +264,9 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
     filters = dataset_filters(text)
     directory = dataset_dir(name)
     manifest = read_manifest(directory)
+    check_tier(name, tier, manifest)
     tiers = manifest.get("tiers", {})
     splits = manifest.get("splits", {})
-    if tier != ALL and tier not in tiers and tier not in splits:
-        raise SuiteError(f"dataset {name!r} has no tier or split {tier!r}; allowed: "
-                         f"{[ALL, *sorted(tiers), *sorted(s for s in splits if s not in tiers)]}")
     wanted = None if tier == ALL or tier not in tiers else set(tiers[tier])
     split = tier if tier not in tiers and tier in splits else None  # a split is a tier too
     scenes = {rec["scene_key"]: rec for _, _, rec in _read_jsonl(directory / SCENES_FILE)}
