@@ -14,7 +14,8 @@ path, solved by Clarabel (ships with Drake). The time-free path is the curve sam
 the suite times it with TOPP-RA. Sampled IRIS regions are not certified collision-free: the path
 is checked with the python-fcl world at the validator's resolution, and where it collides that
 configuration is cut off (in-memory copies of) the regions holding it and GCS is solved again
-(`max_repairs`, planning time); a path still colliding is NO_SOLUTION. With `max_repairs=0` the
+(`max_repairs`, planning time); a path still colliding after `max_repairs` is NO_SOLUTION, and
+repairs stopped by the planning budget are TIMEOUT. With `max_repairs=0` the
 path is returned unchecked and the suite's validator judges it (a collision is
 `invalid_solution`), as it judges every planner's path anyway.
 
@@ -153,6 +154,7 @@ class GcsPlanner:
         stats.update(solve_stats)
         stats["solve_time_s"] = time.perf_counter() - t0
         if path is None:
-            return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
+            status = PlanStatus.TIMEOUT if stats.get("timed_out") else PlanStatus.NO_SOLUTION
+            return PlanResult(status, None, stats)
         stats["waypoints"] = len(path)
         return PlanResult(PlanStatus.SUCCESS, path, stats)

@@ -297,10 +297,11 @@ def make_checker(problem, *, padding_m: float):
         builder.plant(), builder.scene_graph(), problem.scene.without_cans(problem.removed_can_ids),
         mode="plan", gripper_opening_m=problem.gripper_opening_m, held=problem.held,
     )
-    return SceneGraphCollisionChecker(
-        model=builder.Build(), robot_model_instances=[iiwa, wsg], edge_step_size=0.01,
-        env_collision_padding=padding_m, self_collision_padding=0.0,
-    )
+    with quiet_drake():  # its "Allocating contexts ..." info line, once per checker
+        return SceneGraphCollisionChecker(
+            model=builder.Build(), robot_model_instances=[iiwa, wsg], edge_step_size=0.01,
+            env_collision_padding=padding_m, self_collision_padding=0.0,
+        )
 
 
 class RegionBuilder:

@@ -178,7 +178,8 @@ def checked_path(A: list, b: list, edges: list, seeds: list, q_start: np.ndarray
     and solve again, up to `max_repairs` times or the deadline (time.perf_counter()).
 
     Returns:
-        (path (N, 7) or None, stats: solver_status, cost, repairs, cuts, reason when None).
+        (path (N, 7) or None, stats: solver_status, cost, repairs, cuts, reason when None, and
+        timed_out when the deadline stopped the repairs).
     """
     lower, upper = world.robot.lower_rad, world.robot.upper_rad
     stats: dict = {"repairs": 0, "cuts": 0}
@@ -204,7 +205,11 @@ def checked_path(A: list, b: list, edges: list, seeds: list, q_start: np.ndarray
         k = world.first_collision(dense)
         if k < 0:
             return path, stats
-        if attempt == max_repairs or time.perf_counter() >= deadline:
+        if time.perf_counter() >= deadline:
+            stats["reason"] = "the planning budget ran out while repairing a colliding path"
+            stats["timed_out"] = True
+            return None, stats
+        if attempt == max_repairs:
             stats["reason"] = "the path through the regions still collides"
             return None, stats
         cut = cut_regions(A, b, edges, seeds, dense[k], keep=[q_start, q_goal], world=world)

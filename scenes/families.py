@@ -9,7 +9,8 @@ for feasibility (waypoints reachable by collision-aware IK; redrawn otherwise) a
   optional radial wall of random height between them (the paper's "moving bin").
 - `shelf`: a board over the far part of the plate at a random height and depth, on a back panel;
   the waypoint above the plate is lowered to fit under it.
-- `window`: a tall wall between plate and bin with a window the carried can must pass through.
+- `window`: the bin behind a tall, long wall square to its direction; the arm reaches through a
+  window in it with the carried can (a narrow passage: no way over or around).
 - `clutter`: a dense plate (8-12 cans, gaps 0-1 cm) with distractors (bottles, boxes, cups) that
   are obstacles and never recyclable.
 """
@@ -174,26 +175,41 @@ def _draw_shelf(ranges: ShelfRanges, spec: SceneSpec, rng: np.random.Generator) 
 
 
 def _draw_window(ranges: WindowRanges, spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:
-    H = _u(rng, ranges.wall_height_m)
-    xc, w = _u(rng, ranges.window_center_x_m), _u(rng, ranges.window_width_m)
-    zb, hw = _u(rng, ranges.window_bottom_m), _u(rng, ranges.window_height_m)
-    x0, x1 = ranges.wall_x_m
-    y, t = ranges.wall_y_m, ranges.wall_thickness_m
-    if not (x0 < xc - w / 2 and xc + w / 2 < x1):
-        raise SuiteError("scene spec field 'families.window.ranges.window_center_x_m' puts the window "
-                         "outside wall_x_m")
+    fp_p = _footprint(spec.plate.center_m[:2], spec.plate.size_m[:2])
+    for _ in range(200):
+        az = math.radians(_u(rng, ranges.bin_azimuth_deg))
+        r_b, d = _u(rng, ranges.bin_distance_m), _u(rng, ranges.wall_distance_m)
+        H, off = _u(rng, ranges.wall_height_m), _u(rng, ranges.window_offset_m)
+        w, zb, hw = _u(rng, ranges.window_width_m), _u(rng, ranges.window_bottom_m), _u(rng, ranges.window_height_m)
+        L, t = ranges.wall_half_length_m, ranges.wall_thickness_m
+        u = np.array([math.cos(az), math.sin(az)])  # towards the bin
+        v = np.array([-u[1], u[0]])  # along the wall
+        bin_xy = r_b * u
+        fp_b = _footprint(bin_xy, spec.bin.outer_size_m[:2])
+        # plate and bin footprints on their sides of the wall, 5 cm and 2 cm clear of it
+        plate_far = max(float(np.array([x, y]) @ u) for x in (fp_p[0][0], fp_p[1][0]) for y in (fp_p[0][1], fp_p[1][1]))
+        bin_near = min(float(np.array([x, y]) @ u) for x in (fp_b[0][0], fp_b[1][0]) for y in (fp_b[0][1], fp_b[1][1]))
+        if plate_far <= d - t / 2 - 0.05 and bin_near >= d + t / 2 + 0.02:
+            break
+    else:
+        raise SuiteError("window family: no draw of 'families.window.ranges' (bin_azimuth_deg, bin_distance_m, "
+                         "wall_distance_m) leaves the plate and the bin on their sides of the wall in 200 draws")
     zt = min(zb + hw, H - 0.02)
-    parts = {
-        "wall_left": ((x0 + xc - w / 2) / 2, (xc - w / 2 - x0), 0.0, H),
-        "wall_right": ((xc + w / 2 + x1) / 2, (x1 - xc - w / 2), 0.0, H),
-        "wall_sill": (xc, w, 0.0, zb),
-        "wall_lintel": (xc, w, zt, H),
+    a, b = off - w / 2, off + w / 2  # the window's sides, along the wall from the bin's line
+    parts = {  # name: (centre along the wall, length, bottom, top)
+        "wall_left": ((-L + a) / 2, a + L, 0.0, H),
+        "wall_right": ((b + L) / 2, L - b, 0.0, H),
+        "wall_sill": (off, w, 0.0, zb),
+        "wall_lintel": (off, w, zt, H),
     }
-    extra = [_box(n, (cx, y, (z0 + z1) / 2), (sx, t, z1 - z0), WALL_COLOR)
-             for n, (cx, sx, z0, z1) in parts.items() if z1 - z0 > 1e-6 and sx > 1e-6]
-    middle = (xc, y, zb + 0.16)  # the held can's bottom hangs about 0.14 below the gripper frame
-    return _with_layout(spec, plate_xy=spec.plate.center_m[:2], bin_xy=spec.bin.center_xy_m, middle_m=middle,
-                        extra=extra)
+    yaw = az + math.pi / 2
+    extra = [_box(n, (*(d * u + c * v), (z0 + z1) / 2), (sx, t, z1 - z0), WALL_COLOR, yaw=yaw)
+             for n, (c, sx, z0, z1) in parts.items() if z1 - z0 > 1e-6 and sx > 1e-6]
+    # the middle waypoint is in the window: the held can's bottom hangs about 0.14 m below the
+    # gripper frame and the wrist stands about 0.33 m above it; the stack is centred in the opening
+    z_mid = zb + 0.14 + max(0.0, (zt - zb - 0.47) / 2)
+    middle = (*(d * u + off * v), z_mid)
+    return _with_layout(spec, plate_xy=spec.plate.center_m[:2], bin_xy=bin_xy, middle_m=middle, extra=extra)
 def _draw_clutter(ranges: ClutterRanges, spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:
     n_cans = int(rng.integers(ranges.cans[0], ranges.cans[1] + 1))
     gap = _u(rng, ranges.min_gap_m)

@@ -69,19 +69,28 @@ class ShelfRanges(_Ranges):
 
 @dataclasses.dataclass(frozen=True)
 class WindowRanges(_Ranges):
-    """The `wall` variant's wall made tall, with a window between plate and bin."""
+    """The bin behind a tall, wide wall across the bin's direction: the arm reaches through a window.
 
-    wall_height_m: Range = (0.75, 0.90)
-    window_center_x_m: Range = (0.45, 0.65)
-    window_width_m: Range = (0.28, 0.40)
-    window_bottom_m: Range = (0.22, 0.35)
-    window_height_m: Range = (0.38, 0.50)
-    wall_x_m: Range = (0.23, 0.93)
-    wall_y_m: float = 0.19
+    The wall stands `wall_distance_m` from the base axis, square to the bin's direction, and runs
+    `wall_half_length_m` to either side: too tall to go over and too long to go around while the
+    gripper is over the bin, so every path into the bin threads the forearm, the gripper and the
+    carried can through the window (a narrow passage)."""
+
+    bin_azimuth_deg: Range = (80.0, 110.0)
+    bin_distance_m: Range = (0.56, 0.64)
+    wall_distance_m: Range = (0.31, 0.35)
+    wall_half_length_m: float = 1.0
+    wall_height_m: Range = (1.15, 1.30)
+    window_offset_m: Range = (-0.06, 0.06)
+    window_width_m: Range = (0.36, 0.46)
+    window_bottom_m: Range = (0.30, 0.40)
+    window_height_m: Range = (0.55, 0.65)
     wall_thickness_m: float = 0.02
     generator: ClassVar[str] = "window"
-    BOUNDS: ClassVar = {"wall_height_m": (0.3, 2.0), "window_width_m": (0.1, 1.0), "window_bottom_m": (0.0, 1.0),
-                        "window_height_m": (0.1, 1.0), "window_center_x_m": (-1.0, 1.5), "wall_x_m": (-1.5, 1.5),
+    BOUNDS: ClassVar = {"bin_azimuth_deg": (-165, 165), "bin_distance_m": REACH_M, "wall_distance_m": (0.2, 0.6),
+                        "wall_half_length_m": (0.2, 2.0), "wall_height_m": (0.3, 2.0),
+                        "window_offset_m": (-0.5, 0.5), "window_width_m": (0.1, 1.0),
+                        "window_bottom_m": (0.0, 1.0), "window_height_m": (0.1, 1.0),
                         "wall_thickness_m": (0.005, 0.2)}
 
 

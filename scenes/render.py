@@ -85,7 +85,8 @@ def render_overview(scene: Scene, *, q_iiwa: np.ndarray | None = None, width_px:
 
     The camera looks at the middle of base, plate and bin from 2.4 m away, 40 degrees above the
     table, from the side the plate and bin face (so the robot does not hide them), or from the
-    robot's side when a shelf's back panel would hide the plate.
+    robot's side when a shelf's back panel would hide the plate, and from the bin's side of a tall
+    window wall (through the window).
 
     Returns:
         The colour image (H, W, 3) uint8.
@@ -101,6 +102,9 @@ def render_overview(scene: Scene, *, q_iiwa: np.ndarray | None = None, width_px:
     if any(o.name.startswith("shelf") for o in spec.extra):
         az += np.pi  # a shelf's back panel faces outward: look from the robot's side instead
     d, el = 2.4, np.radians(40.0)
+    if any(o.name == "wall_lintel" for o in spec.extra):
+        # a tall window wall hides the bin behind it: look through the window from the bin's side
+        az, el = float(np.arctan2(spec.bin.center_xy_m[1], spec.bin.center_xy_m[0])) + 0.5, np.radians(35.0)
     eye = target + d * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
     cams = dataclasses.replace(spec.cameras, width_px=width_px, height_px=height_px,
                                poses={"overview": CameraPose(tuple(eye), tuple(target))})

@@ -14,10 +14,11 @@ import statistics
 import time
 
 from suite.cli.args import nonneg_int, positive_int
+from suite.problems import DEFAULT_DATASET
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dataset", default="recycle-v1", help="dataset to load (default recycle-v1)")
+    p.add_argument("--dataset", default=DEFAULT_DATASET, help=f"dataset to load (default {DEFAULT_DATASET})")
     p.add_argument("--loads", type=positive_int, default=5, help="timed loads of the dataset (default 5)")
     p.add_argument("--scenes", type=positive_int, default=10, help="generated scenes per family (default 10)")
     p.add_argument("--first-seed", type=nonneg_int, default=50_000, help="first scene seed (default 50000)")

@@ -17,10 +17,11 @@ import statistics
 import time
 
 from suite.cli.args import positive_int
+from suite.problems import DEFAULT_TIER
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dataset", default="recycle-v1:quick", help="NAME[:TIER] (default recycle-v1:quick)")
+    p.add_argument("--dataset", default=DEFAULT_TIER, help=f"NAME[:TIER] (default {DEFAULT_TIER})")
     p.add_argument("--worlds", type=positive_int, default=6, help="worlds to grow (default 6)")
     p.add_argument("--pick", choices=("slowest", "spread"), default="slowest",
                    help="the worlds the shipped cache records as slowest, or spread over the tier (default slowest)")

@@ -29,7 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--planners", default=None, help=f"comma-separated planner names (default {','.join(d.planners)})")
     p.add_argument("--dataset", default=None, metavar="NAME[:TIER[:FILTERS]]",
                    help=f"run a frozen dataset's stored problems (default {d.dataset}); TIER may be a split (tune, "
-                        "test); FILTERS keep some families or kinds, e.g. recycle-v1:test:family=wall,kind=transit "
+                        "test); FILTERS keep some families or kinds, e.g. recycle-v2:test:family=wall,kind=transit "
                         "(the scene flags below select generated scenes instead)")
     p.add_argument("--variant", default=None, help=f"generated scenes of this variant or family (default {d.variant})")
     p.add_argument("--seed", type=nonneg_int, default=None,

@@ -5,11 +5,12 @@ from __future__ import annotations
 import argparse
 
 from suite.cli.args import positive_float
+from suite.problems import DEFAULT_TIER
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dataset", default="recycle-v1:quick", metavar="NAME[:TIER]",
-                   help="the dataset (tier) to export (default recycle-v1:quick)")
+    p.add_argument("--dataset", default=DEFAULT_TIER, metavar="NAME[:TIER]",
+                   help=f"the dataset (tier) to export (default {DEFAULT_TIER})")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="export directory: problems.jsonl, schema.json, robot/*.urdf, README.md")
     p.add_argument("--time-limit-s", type=positive_float, default=5.0,

@@ -6,11 +6,12 @@ import argparse
 import sys
 
 from suite.cli.args import positive_float
+from suite.problems import DEFAULT_TIER
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--dataset", default="recycle-v1:quick", metavar="NAME[:TIER]",
-                   help="the dataset (tier) the problems were exported from (default recycle-v1:quick); "
+    p.add_argument("--dataset", default=DEFAULT_TIER, metavar="NAME[:TIER]",
+                   help=f"the dataset (tier) the problems were exported from (default {DEFAULT_TIER}); "
                         "its problems missing from the file are recorded as no_result")
     p.add_argument("--results", required=True, metavar="FILE",
                    help="JSON lines: problem_id, status, path (N x 7 rad, or null), planning_time_s [, hardware, notes, stats]")

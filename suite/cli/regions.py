@@ -27,7 +27,7 @@ HARD_LIMIT_S = 1800.0
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True, parser_class=type(p))
     b = sub.add_parser("build", help="build (or complete) the gcs regions of every collision world of a dataset")
-    b.add_argument("--dataset", required=True, help="NAME[:TIER] (e.g. recycle-v1:quick)")
+    b.add_argument("--dataset", required=True, help="NAME[:TIER] (e.g. recycle-v2:quick)")
     b.add_argument("--out", default=None,
                    help="region cache directory (default scenes/datasets/NAME/regions/, read by gcs)")
     b.add_argument("--iris", default=None, help="IRIS algorithm: np2 or zo (default: gcs's default)")

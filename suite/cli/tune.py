@@ -21,8 +21,8 @@ from pathlib import Path
 
 from scenes.errors import SuiteError
 from suite.cli.args import positive_float, positive_int
+from suite.problems import DEFAULT_DATASET
 
-DEFAULT_DATASET = "recycle-v1"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -191,7 +191,7 @@ def write_export(dataset_arg: str, out: str | Path, *, time_limit_s: float) -> d
     """Write the export of dataset `NAME[:TIER]` into `out` (created; must not hold an export).
 
     Args:
-        dataset_arg: the dataset and tier, e.g. "recycle-v1:quick".
+        dataset_arg: the dataset and tier, e.g. "recycle-v2:quick".
         out: the export directory.
         time_limit_s: the planning budget per problem written into every problem, s.
 

@@ -21,6 +21,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field
 
 from scenes.errors import SuiteError
+from suite.problems import DEFAULT_TIER
 from suite.run.trial import TrialSpec, config_dict, make_config, make_trial, run_trial
 
 log = logging.getLogger(__name__)
@@ -31,7 +32,6 @@ MANIFEST_FILE = "manifest.json"
 HARD_LIMIT_GRACE_S = 30.0
 HARD_LIMIT_FACTOR = 3.0
 #: What `compare` runs by default: the frozen benchmark's quick tier.
-DEFAULT_DATASET = "recycle-v1:quick"
 #: Address-space cap of a worker process (MiB). Drake maps much virtual memory it never touches:
 #: a worker that ran 60 trials of ik, rrt and trajopt peaked at 0.63 GiB (VmPeak), so 8 GiB
 #: stops only a runaway planner.
@@ -61,7 +61,7 @@ class CompareConfig:
     hard_limit_grace_s: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)] = HARD_LIMIT_GRACE_S
     #: a frozen dataset `NAME[:TIER]` to run instead of generated scenes (None: generate them from
     #: variant, seed, scenes, cans and grasps)
-    dataset: str | None = DEFAULT_DATASET
+    dataset: str | None = DEFAULT_TIER
     #: each worker process's address-space cap, MiB (a trial beyond it: `crash`, `out_of_memory`)
     memory_limit_mb: Annotated[int, Field(ge=256, strict=True)] = DEFAULT_MEMORY_LIMIT_MB
     #: planning budgets (s): every planner runs every problem at each (empty: time_limit_s alone)

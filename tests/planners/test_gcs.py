@@ -114,6 +114,16 @@ def test_with_repairs_on_a_colliding_path_is_not_returned(wall_transit, tmp_path
     assert "collides" in r.stats["reason"]
 
 
+def test_repairs_stopped_by_the_budget_are_a_timeout(wall_transit, tmp_path):
+    # The same colliding region, with a budget spent before the first repair: that is the budget's
+    # doing, not a proof that no path exists.
+    cfg = GcsConfig(**FAST, regions_dir=str(tmp_path), build_regions=False)
+    _invalid_region_cache(wall_transit, tmp_path, cfg.region_options())
+    r = GcsPlanner(cfg).plan(wall_transit.with_(time_limit_s=1e-9))
+    assert r.status is PlanStatus.TIMEOUT and r.path is None
+    assert r.stats["timed_out"] and "budget" in r.stats["reason"]
+
+
 def test_registry_and_config_errors():
     assert isinstance(make_planner("gcs"), GcsPlanner)
     with pytest.raises(SuiteError, match="iris"):
