@@ -230,10 +230,17 @@ def recorded_trial_ids(path: Path) -> set[str]:
 
 
 def git_commit() -> str | None:
+    """The checkout's commit, with "+dirty" when tracked files differ from it (the code that ran is
+    then not that commit's)."""
+    here = Path(__file__).parent
     try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True,
-                             text=True, timeout=5)
-        return out.stdout.strip() or None
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)
+        commit = out.stdout.strip()
+        if not commit:
+            return None
+        changed = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                                 capture_output=True, text=True, timeout=10)
+        return commit + "+dirty" if changed.returncode == 0 and changed.stdout.strip() else commit
     except (OSError, subprocess.SubprocessError):
         return None
 

@@ -243,22 +243,22 @@ def test_cli_export_and_import_into_an_existing_run(tmp_path, capsys, quick):
             "path": [problem["q_start"], problem["q_goal"]], "planning_time_s": 0.01}
     results = write_lines(tmp_path / "r.jsonl", [line])
     run = tmp_path / "run"
-    assert main(["import", "--results", results, "--planner", "first", "--out", str(run), "--no-plots"]) == 0
+    assert main(["import", "--dataset", DATASET, "--results", results, "--planner", "first", "--out", str(run), "--no-plots"]) == 0
     assert "imported first: 104 problems" in capsys.readouterr().out
-    assert main(["import", "--results", results, "--planner", "second", "--into", str(run), "--no-plots"]) == 0
+    assert main(["import", "--dataset", DATASET, "--results", results, "--planner", "second", "--into", str(run), "--no-plots"]) == 0
     capsys.readouterr()
     records = read_trials(run)
     assert [r["planner"] for r in records].count("second") == len(quick.ids)
     assert "second" in (run / "summary.md").read_text()
     assert len(json.loads((run / "manifest.json").read_text())["imports"]) == 2
     # the same planner again, or a bad line: one error line, exit 2, nothing appended
-    assert main(["import", "--results", results, "--planner", "second", "--into", str(run), "--no-plots"]) == 2
+    assert main(["import", "--dataset", DATASET, "--results", results, "--planner", "second", "--into", str(run), "--no-plots"]) == 2
     assert "already has records of planner 'second'" in capsys.readouterr().err
     assert main(["import", "--dataset", "recycle-v1", "--results", results, "--planner", "third", "--into", str(run),
                  "--no-plots"]) == 2
     assert "is a run on 'recycle-v1:quick', not on recycle-v1:all" in capsys.readouterr().err
     bad = write_lines(tmp_path / "bad.jsonl", [line, {**line, "path": [[0.0] * 7, [1.0] * 8]}])
-    assert main(["import", "--results", bad, "--planner", "third", "--into", str(run), "--no-plots"]) == 2
+    assert main(["import", "--dataset", DATASET, "--results", bad, "--planner", "third", "--into", str(run), "--no-plots"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "line 2" in err
     assert len(read_trials(run)) == 2 * len(quick.ids)
