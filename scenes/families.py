@@ -100,6 +100,13 @@ def _footprint(center_xy, size_xy) -> tuple[np.ndarray, np.ndarray]:
     return c - h, c + h
 
 
+def _extent_along(fp, u: np.ndarray) -> tuple[float, float]:
+    """(min, max) of a footprint's corners projected on the unit vector `u`."""
+    (x0, y0), (x1, y1) = fp
+    proj = [float(np.array([x, y]) @ u) for x in (x0, x1) for y in (y0, y1)]
+    return min(proj), max(proj)
+
+
 def _apart(a, b, gap: float) -> bool:
     (alo, ahi), (blo, bhi) = a, b
     return bool(np.any(alo > bhi + gap) or np.any(blo > ahi + gap))
@@ -147,6 +154,8 @@ def _draw_station(ranges: StationRanges, spec: SceneSpec, rng: np.random.Generat
         middle = (*_polar((r_p + r_b) / 2, az_mid), z_mid)
         return _with_layout(spec, plate_xy=plate_xy, bin_xy=bin_xy, middle_m=middle, extra=extra)
     raise SuiteError("station family: no plate/bin layout fits the ranges in 200 draws; widen them")
+
+
 def _draw_shelf(ranges: ShelfRanges, spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:
     plate_xy = np.asarray(spec.plate.center_m[:2], float)
     radial = plate_xy / np.linalg.norm(plate_xy)
@@ -176,19 +185,18 @@ def _draw_shelf(ranges: ShelfRanges, spec: SceneSpec, rng: np.random.Generator) 
 
 def _draw_window(ranges: WindowRanges, spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:
     fp_p = _footprint(spec.plate.center_m[:2], spec.plate.size_m[:2])
+    L, t = ranges.wall_half_length_m, ranges.wall_thickness_m
     for _ in range(200):
         az = math.radians(_u(rng, ranges.bin_azimuth_deg))
         r_b, d = _u(rng, ranges.bin_distance_m), _u(rng, ranges.wall_distance_m)
         H, off = _u(rng, ranges.wall_height_m), _u(rng, ranges.window_offset_m)
         w, zb, hw = _u(rng, ranges.window_width_m), _u(rng, ranges.window_bottom_m), _u(rng, ranges.window_height_m)
-        L, t = ranges.wall_half_length_m, ranges.wall_thickness_m
         u = np.array([math.cos(az), math.sin(az)])  # towards the bin
         v = np.array([-u[1], u[0]])  # along the wall
         bin_xy = r_b * u
-        fp_b = _footprint(bin_xy, spec.bin.outer_size_m[:2])
         # plate and bin footprints on their sides of the wall, 5 cm and 2 cm clear of it
-        plate_far = max(float(np.array([x, y]) @ u) for x in (fp_p[0][0], fp_p[1][0]) for y in (fp_p[0][1], fp_p[1][1]))
-        bin_near = min(float(np.array([x, y]) @ u) for x in (fp_b[0][0], fp_b[1][0]) for y in (fp_b[0][1], fp_b[1][1]))
+        plate_far = _extent_along(fp_p, u)[1]
+        bin_near = _extent_along(_footprint(bin_xy, spec.bin.outer_size_m[:2]), u)[0]
         if plate_far <= d - t / 2 - 0.05 and bin_near >= d + t / 2 + 0.02:
             break
     else:
@@ -210,6 +218,8 @@ def _draw_window(ranges: WindowRanges, spec: SceneSpec, rng: np.random.Generator
     z_mid = zb + 0.14 + max(0.0, (zt - zb - 0.47) / 2)
     middle = (*(d * u + off * v), z_mid)
     return _with_layout(spec, plate_xy=spec.plate.center_m[:2], bin_xy=bin_xy, middle_m=middle, extra=extra)
+
+
 def _draw_clutter(ranges: ClutterRanges, spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:
     n_cans = int(rng.integers(ranges.cans[0], ranges.cans[1] + 1))
     gap = _u(rng, ranges.min_gap_m)

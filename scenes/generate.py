@@ -210,13 +210,12 @@ def _gripper_clear(can: CanPose, others, spec: SceneSpec) -> bool:
         X0 = g.X_WG @ X_GS
         half = aabb_half_extents(kind, dims, X0[:3, :3]) + np.abs(rise) / 2  # the box swept by the descent
         near = ~np.any(np.abs(centres - (X0[:3, 3] + rise / 2)) - halves - half > _AABB_SLACK_M, axis=1)
-        if near.any():
-            for k in np.flatnonzero(near):
-                for X_WG in poses:
-                    X = X_WG @ X_GS
-                    part = fcl.CollisionObject(geometry, fcl.Transform(X[:3, :3], X[:3, 3]))
-                    if fcl.collide(part, obstacles[k][0], req, fcl.CollisionResult()):
-                        return False
+        for k in np.flatnonzero(near):
+            for X_WG in poses:
+                X = X_WG @ X_GS
+                part = fcl.CollisionObject(geometry, fcl.Transform(X[:3, :3], X[:3, 3]))
+                if fcl.collide(part, obstacles[k][0], req, fcl.CollisionResult()):
+                    return False
     return True
 
 
@@ -259,13 +258,9 @@ def _clear_of_extras(can: CanPose, spec: SceneSpec) -> bool:
     r, h = spec.can.radius_m, spec.can.height_m
     need = spec.cans.min_gap_m + 1e-4
     x, y, z = can.p_WC_m
-    if can.lying:
-        c, s = abs(math.cos(can.axis_yaw_rad)), abs(math.sin(can.axis_yaw_rad))
-        hx, hy, hz = c * h / 2 + s * r, s * h / 2 + c * r, r
-        z_lo = z_hi = z  # only the cross-section through the axis is the whole footprint
-    else:
-        hx, hy, hz = r, r, h / 2
-        z_lo, z_hi = z - h / 2, z + h / 2
+    hx, hy, hz = map(float, _can_half_extents(can, r, h))
+    # only the cross-section through a lying can's axis is its whole footprint
+    z_lo, z_hi = (z, z) if can.lying else (z - h / 2, z + h / 2)
     outer = inner = None
     obj = None
     req = None

@@ -46,14 +46,12 @@ def measure_generation(families, *, scenes: int, first_seed: int, cans: int) -> 
     from scenes.errors import SuiteError
     from scenes.generate import generate_scene
     from scenes.grasp_rule import truth_grasp
-    from scenes.spec import load_spec
     from suite.problems.cycle import build_problems
+    from suite.run.build_dataset import family_spec
 
     out = {}
     for family in families:
-        spec = load_spec(variant=family)
-        if family != "clutter":
-            spec = spec.with_can_count(cans)
+        spec = family_spec(family, cans)
         scene_s, problems_s, failed = [], [], 0
         for seed in range(first_seed, first_seed + scenes):
             t0 = time.perf_counter()

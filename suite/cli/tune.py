@@ -24,7 +24,6 @@ from suite.cli.args import positive_float, positive_int
 from suite.problems import DEFAULT_DATASET
 
 
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--planner", required=True, help="the planner to tune (see planners/tuned.py for its search)")
     p.add_argument("--dataset", default=DEFAULT_DATASET, help=f"dataset whose tune split is used (default {DEFAULT_DATASET})")

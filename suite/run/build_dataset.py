@@ -75,6 +75,15 @@ class BuildSettings:
     jobs: int = 2
 
 
+def family_spec(family: str, cans: int | None):
+    """The spec a dataset build draws `family`'s scenes from: `cans` cans per scene (None: the
+    spec's own count), except `clutter`, which draws its own."""
+    from scenes.spec import load_spec
+
+    spec = load_spec(variant=family)
+    return spec.with_can_count(cans) if cans is not None and family != "clutter" else spec
+
+
 def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple[str, Any, dict]]]:
     """Scenes and their distinct, posable problems with trivial/difficulty/split filled in.
 
@@ -83,14 +92,11 @@ def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple
     """
     from scenes.generate import generate_scene
     from scenes.grasp_rule import truth_grasp
-    from scenes.spec import load_spec
     from suite.problems.cycle import build_problems
 
     scene_recs, out, seen = [], [], set()
     for family in settings.families:
-        spec = load_spec(variant=family)
-        if settings.cans is not None and family != "clutter":
-            spec = spec.with_can_count(settings.cans)
+        spec = family_spec(family, settings.cans)
         made, seed = 0, settings.seed
         while made < settings.scenes:
             if seed - settings.seed > 3 * settings.scenes + 10:

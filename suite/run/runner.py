@@ -31,7 +31,6 @@ MANIFEST_FILE = "manifest.json"
 #: Grace beyond a trial's time limit before the parent kills its worker (scene building, timing).
 HARD_LIMIT_GRACE_S = 30.0
 HARD_LIMIT_FACTOR = 3.0
-#: What `compare` runs by default: the frozen benchmark's quick tier.
 #: Address-space cap of a worker process (MiB). Drake maps much virtual memory it never touches:
 #: a worker that ran 60 trials of ik, rrt and trajopt peaked at 0.63 GiB (VmPeak), so 8 GiB
 #: stops only a runaway planner.
