@@ -104,6 +104,21 @@ def cut_regions(A: list, b: list, edges: list, seeds: list, q_bad: np.ndarray, *
 
 
 
+def usable_regions(A: list, b: list) -> list[int]:
+    """Indices of the regions {A_i q <= b_i} that GCS can take: non-empty and bounded. Cuts can
+    empty a region; Drake's GcsTrajectoryOptimization computes every region's bounding box when it
+    joins subgraphs and throws on an empty or unbounded one ("Failed to compute the lower bound of
+    a convex set")."""
+    from pydrake.geometry.optimization import HPolyhedron
+
+    keep = []
+    for i, (Ai, bi) in enumerate(zip(A, b)):
+        poly = HPolyhedron(np.asarray(Ai, float), np.asarray(bi, float))
+        if not poly.IsEmpty() and poly.IsBounded():
+            keep.append(i)
+    return keep
+
+
 def _solver(name: str):
     from pydrake.solvers import ClarabelSolver, ScsSolver
 
@@ -135,7 +150,8 @@ def sample_trajectory(traj, *, order: int, step_rad: float) -> np.ndarray:
 def solve_gcs(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.ndarray, *, order: int = 1,
               max_rounded_paths: int = 5, solver: str = "clarabel", seed: int = 0):
     """One GCS shortest-path solve (convex relaxation, rounding, restriction) through the regions
-    {A_i q <= b_i} joined by `edges`, from the point q_start to the point q_goal.
+    {A_i q <= b_i} joined by `edges`, from the point q_start to the point q_goal. Regions that cuts
+    left empty (or unbounded) are left out (`usable_regions`).
 
     Returns:
         (trajectory, MathematicalProgramResult).
@@ -148,7 +164,10 @@ def solve_gcs(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.nda
     from pydrake.planning import GcsTrajectoryOptimization
 
     gcs = GcsTrajectoryOptimization(len(q_start))
-    main = gcs.AddRegions([HPolyhedron(Ai, bi) for Ai, bi in zip(A, b)], edges, order, name="regions")
+    keep = usable_regions(A, b)
+    index = {old: new for new, old in enumerate(keep)}
+    edges = [(index[i], index[j]) for i, j in edges if i in index and j in index]
+    main = gcs.AddRegions([HPolyhedron(A[i], b[i]) for i in keep], edges, order, name="regions")
     source = gcs.AddRegions([Point(q_start)], 0, name="start")
     target = gcs.AddRegions([Point(q_goal)], 0, name="goal")
     gcs.AddEdges(source, main)

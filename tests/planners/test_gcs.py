@@ -184,3 +184,18 @@ def test_a_region_whose_start_goal_segment_collides_is_cut_keeping_both_covered(
     holds = lambda i, q: bool(np.all(A[i] @ q <= b[i] + 1e-9))
     assert not holds(0, np.zeros(7)) and holds(0, q0)  # the start, which only it holds, is kept
     assert holds(1, q1)  # the goal stays covered, by the region that was not cut
+
+
+def test_a_region_cuts_left_empty_is_left_out_of_the_solve():
+    """Drake's GcsTrajectoryOptimization throws on an empty region when it joins subgraphs
+    ("Failed to compute the lower bound of a convex set"); solve_gcs leaves such a region out."""
+    from planners.gcs_solve import solve_gcs, usable_regions
+
+    faces = np.vstack([np.eye(7), -np.eye(7)])
+    box = lambda lo, hi: np.concatenate([np.full(7, hi), -np.full(7, lo)])
+    A = [faces, faces, faces]
+    b = [box(-1.0, 1.0), box(0.5, 2.0), box(0.5, -1.0)]  # the third: x >= 0.5 and x <= -1, empty
+    assert usable_regions(A, b) == [0, 1]
+    traj, result = solve_gcs(A, b, [(0, 1), (1, 0), (1, 2), (2, 1)], np.zeros(7), np.full(7, 1.5))
+    assert result.is_success()
+    np.testing.assert_allclose(traj.value(traj.end_time()).ravel(), np.full(7, 1.5), atol=1e-6)
