@@ -1,8 +1,8 @@
 """`python -m suite tune --planner NAME`: choose a planner's settings on a dataset's tuning split.
 
 Every candidate of the planner's documented search (`planners.tuned.SEARCH_SPACES`, class defaults
-first) runs on the same non-trivial problems of the dataset's `tune` split (up to
-`--per-family` per family, the lowest problem ids: a fixed, content-defined sample), through the
+first) runs on the same non-trivial problems of the dataset's `tune` split (all of them, or up
+to `--per-family` per family, the lowest problem ids: a fixed, content-defined sample), through the
 ordinary trial machinery (validation, TOPP-RA, metrics). The rule of `suite.report.tuning` picks
 one, and `--write` stores it with the whole table in planners/configs/NAME.yaml, which every later
 run uses as the planner's defaults. Runs are kept under `--out` (one directory per candidate), so
@@ -27,8 +27,9 @@ from suite.problems import DEFAULT_DATASET
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--planner", required=True, help="the planner to tune (see planners/tuned.py for its search)")
     p.add_argument("--dataset", default=DEFAULT_DATASET, help=f"dataset whose tune split is used (default {DEFAULT_DATASET})")
-    p.add_argument("--per-family", type=positive_int, default=6,
-                   help="non-trivial tuning problems per family (default 6)")
+    p.add_argument("--per-family", type=positive_int, default=None,
+                   help="at most this many non-trivial tuning problems per family (default: all of them; a "
+                        "small sample misses what a hard family tells apart)")
     p.add_argument("--time-limit-s", type=positive_float, default=5.0, help="budget per problem, s (default 5)")
     p.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
     p.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
@@ -48,9 +49,9 @@ def grid(planner: str) -> list[dict]:
     return [dict(zip(names, values)) for values in itertools.product(*(space[n] for n in names))]
 
 
-def tuning_problems(dataset: str, *, per_family: int, time_limit_s: float):
-    """The sample: up to per_family non-trivial problems of each family of the tune split,
-    lowest problem id first. Returns (dataset, [(problem, meta)])."""
+def tuning_problems(dataset: str, *, per_family: int | None, time_limit_s: float):
+    """The sample: the non-trivial problems of the tune split, up to per_family of each family
+    (None: all), lowest problem id first. Returns (dataset, [(problem, meta)])."""
     from suite.problems.dataset import load_dataset, parse_dataset_arg
 
     name, tier = parse_dataset_arg(dataset)
@@ -102,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
 def _tune(args: argparse.Namespace, out: Path) -> int:
     from planners.registry import planner_class
     from planners.tuned import OBJECTIVE, config_path
-    from suite.report.tuning import choose, evaluate, table_rows, weak_families
+    from suite.report.tuning import RULE, choose, evaluate, table_rows, weak_families
     from suite.run.records import read_trials
     from suite.run.runner import run_trials
     from suite.run.trial import config_dict, make_config, make_trial
@@ -137,9 +138,7 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
             "planner": args.planner,
             "settings": results[chosen].settings,
             "chosen_by": "python -m suite " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["tune"] else "suite tune",
-            "rule": "most distinct problems solved; ties: lowest median time to solve (failures at the budget) for "
-                    "objective 'time', lowest median length ratio on the problems every candidate solved for "
-                    "'length', within 10% (time) or 1% (length) counted as equal; then the earlier candidate",
+            "rule": RULE,
             "objective": objective,
             "dataset": {"name": ds.name, "hash": ds.hash, "split": "tune", "problems": len(problems),
                         "per_family": args.per_family, "non_trivial_only": True},

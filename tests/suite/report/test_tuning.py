@@ -60,6 +60,17 @@ def test_weak_family_is_flagged_only_when_another_candidate_does_better():
     assert weak_families([a], chosen=0) == []  # nothing documented does better
 
 
+def test_a_candidate_weak_where_another_does_better_is_out_of_the_choice():
+    # ik on recycle-v2's tune split: a tie in problems solved, the faster one weaker on window
+    slow = _result(67, 0.196, 1.43, {"window": (8, 31), "clutter": (14, 24)})
+    fast = _result(67, 0.149, 1.46, {"window": (6, 31), "clutter": (15, 24)})
+    assert choose([slow, fast], objective="time") == 0
+    # when every candidate is weak somewhere, the plain rule decides
+    a = _result(5, 0.2, 1.0, {"window": (1, 4), "wall": (4, 6)})
+    b = _result(4, 0.1, 1.0, {"window": (3, 4), "wall": (1, 6)})
+    assert choose([a, b], objective="time") == 0
+
+
 def test_evaluate_counts_distinct_problems_and_the_common_subset():
     fast = [record("rrt", seed=i, length_rad=1.0, time_s=0.1) for i in range(3)] + [
         record("rrt", seed=3, status="timeout", time_s=5.0)]
@@ -100,6 +111,9 @@ def test_tuning_sample_is_non_trivial_tune_split_problems_per_family():
     assert all(families.count(f) <= 2 for f in set(families)) and len(set(families)) >= 5
     test_ids = set(__import__("suite.problems.dataset", fromlist=["x"]).load_dataset("recycle-v1:quick").ids)
     assert not test_ids & {m["problem_id"] for m in metas}  # the quick tier (test split) is never tuned on
+    _, everything = tuning_problems("recycle-v1", per_family=None, time_limit_s=1.0)  # the default: all
+    tune = __import__("suite.problems.dataset", fromlist=["x"]).load_dataset("recycle-v1:tune")
+    assert len(everything) == sum(not tune.meta[pid]["trivial"] for pid in tune.ids) > len(problems)
 
 
 def test_a_tuning_directory_in_use_is_refused_in_one_line(tmp_path, capsys):
