@@ -190,10 +190,22 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
     return judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s)
 
 
+#: A success returned later than its budget by more than this share of it plus LATE_GRACE_S is a
+#: timeout (clock checks between iterations overshoot by milliseconds; more is a late answer).
+LATE_GRACE_SHARE = 0.05
+LATE_GRACE_S = 0.01
+
+
+def late_after_s(time_limit_s: float) -> float:
+    """The planning time after which a success counts as a timeout (s)."""
+    return time_limit_s * (1 + LATE_GRACE_SHARE) + LATE_GRACE_S
+
+
 def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: PlanResult,
                  planning_time_s: float) -> dict[str, Any]:
     """Complete a trial record from a planner's result: a claimed solution is validated, timed
-    with TOPP-RA and scored, identically for the suite's planners and imported external ones.
+    with TOPP-RA and scored, identically for the suite's planners and imported external ones. A
+    claimed solution returned after the budget (`late_after_s`) is a TIMEOUT (`stats.late_by_s`).
 
     The path is judged as it is stored (rounded to 1e-10 rad), so that a stored path re-scored
     or re-imported gives exactly the record's metrics.
@@ -213,6 +225,14 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
     stats = dict(result.stats)
     path = None if result.path is None else np.asarray(result.path, float).round(10)
     metrics: dict[str, float] = {}
+    late_by = planning_time_s - late_after_s(problem.time_limit_s)
+    if status == PlanStatus.SUCCESS and late_by > 0:
+        # A solve that cannot be interrupted (SNOPT, a GCS solve, OMPL between its checks) may
+        # return after the budget: credited, it would measure the clock checks, not the planner.
+        status = PlanStatus.TIMEOUT
+        stats["late_by_s"] = planning_time_s - problem.time_limit_s
+        stats["reason"] = (f"a path came {planning_time_s:.3g} s into a {problem.time_limit_s:g} s budget "
+                           "(it does not count)")
     if status == PlanStatus.SUCCESS:
         reason = validate_path(problem, path, world)
         if reason is not None:

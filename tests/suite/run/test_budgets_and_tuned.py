@@ -45,3 +45,21 @@ def test_tuned_settings_are_the_defaults_and_config_overrides_them():
     assert default == tuned["range_rad"]
     over = prepare_trials(CompareConfig(planners=("rrt",), planner_configs={"rrt": {"range_rad": 0.3}}))
     assert {t.planner_config["range_rad"] for t in over} == {0.3}
+
+
+def test_a_success_returned_after_the_budget_is_a_timeout(open_transit):
+    """A valid path that comes after the budget (an uninterruptible solve) does not count."""
+    from planners.base import PlanResult, PlanStatus
+    from planners.worlds import collision_world
+    from suite.run.trial import judge_result, late_after_s, make_trial, trial_record
+
+    problem = open_transit.with_(time_limit_s=0.2)
+    spec = make_trial(problem, planner="rrt", planner_config={}, run_seed=0)
+    straight = PlanResult(PlanStatus.SUCCESS, [problem.q_start, problem.q_goal], {})
+    world = collision_world(problem)
+    on_time = judge_result(trial_record(spec), spec=spec, world=world, result=straight, planning_time_s=0.2)
+    assert on_time["status"] == "success"  # the open transit's straight motion is valid
+    late = judge_result(trial_record(spec), spec=spec, world=world, result=straight,
+                        planning_time_s=late_after_s(0.2) + 0.01)
+    assert late["status"] == "timeout" and late["path"] is None
+    assert late["stats"]["late_by_s"] > 0 and "does not count" in late["stats"]["reason"]
