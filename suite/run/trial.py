@@ -225,14 +225,6 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
     stats = dict(result.stats)
     path = None if result.path is None else np.asarray(result.path, float).round(10)
     metrics: dict[str, float] = {}
-    late_by = planning_time_s - late_after_s(problem.time_limit_s)
-    if status == PlanStatus.SUCCESS and late_by > 0:
-        # A solve that cannot be interrupted (SNOPT, a GCS solve, OMPL between its checks) may
-        # return after the budget: credited, it would measure the clock checks, not the planner.
-        status = PlanStatus.TIMEOUT
-        stats["late_by_s"] = planning_time_s - problem.time_limit_s
-        stats["reason"] = (f"a path came {planning_time_s:.3g} s into a {problem.time_limit_s:g} s budget "
-                           "(it does not count)")
     if status == PlanStatus.SUCCESS:
         reason = validate_path(problem, path, world)
         if reason is not None:
@@ -250,6 +242,14 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
                            reference_length_rad=spec.meta.get("reference_length_rad"),
                            reference_ee_length_m=spec.meta.get("reference_ee_length_m"))
             metrics = record_metrics(scored)  # NaN (undefined, or timing failed) stored as null
+    if status in (PlanStatus.SUCCESS, PlanStatus.TIMING_FAILED) and planning_time_s > late_after_s(problem.time_limit_s):
+        # A solve that cannot be interrupted (SNOPT, a GCS solve, OMPL between its checks) may
+        # return a valid path after the budget: credited, it would measure the clock checks, not
+        # the planner.
+        status, metrics = PlanStatus.TIMEOUT, {}
+        stats["late_by_s"] = planning_time_s - problem.time_limit_s
+        stats["reason"] = (f"a valid path came {planning_time_s:.3g} s into a {problem.time_limit_s:g} s budget "
+                           "(it does not count)")
     record.update(
         status=status.value,
         planning_time_s=planning_time_s,

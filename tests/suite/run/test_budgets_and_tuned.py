@@ -48,7 +48,8 @@ def test_tuned_settings_are_the_defaults_and_config_overrides_them():
 
 
 def test_a_success_returned_after_the_budget_is_a_timeout(open_transit):
-    """A valid path that comes after the budget (an uninterruptible solve) does not count."""
+    """A valid path that comes after the budget (an uninterruptible solve) does not count; an invalid
+    one stays invalid."""
     from planners.base import PlanResult, PlanStatus
     from planners.worlds import collision_world
     from suite.run.trial import judge_result, late_after_s, make_trial, trial_record
@@ -63,3 +64,6 @@ def test_a_success_returned_after_the_budget_is_a_timeout(open_transit):
                         planning_time_s=late_after_s(0.2) + 0.01)
     assert late["status"] == "timeout" and late["path"] is None
     assert late["stats"]["late_by_s"] > 0 and "does not count" in late["stats"]["reason"]
+    off = PlanResult(PlanStatus.SUCCESS, [problem.q_start, problem.q_goal + 0.01], {})
+    late_invalid = judge_result(trial_record(spec), spec=spec, world=world, result=off, planning_time_s=9.0)
+    assert late_invalid["status"] == "invalid_solution"
