@@ -230,6 +230,14 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
         if reason is not None:
             status = PlanStatus.INVALID_SOLUTION
             stats["invalid_reason"] = reason
+        elif planning_time_s > late_after_s(problem.time_limit_s):
+            # A solve that cannot be interrupted (SNOPT, a GCS solve, OMPL between its checks) may
+            # return a valid path after the budget: credited, it would measure the clock checks,
+            # not the planner. It is neither timed nor scored.
+            status = PlanStatus.TIMEOUT
+            stats["late_by_s"] = planning_time_s - problem.time_limit_s
+            stats["reason"] = (f"a valid path came {planning_time_s:.3g} s into a {problem.time_limit_s:g} s "
+                               "budget (it does not count)")
         else:
             from suite.scoring.metrics import record_metrics, score
             from suite.scoring.timing import time_parameterize
@@ -242,14 +250,6 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
                            reference_length_rad=spec.meta.get("reference_length_rad"),
                            reference_ee_length_m=spec.meta.get("reference_ee_length_m"))
             metrics = record_metrics(scored)  # NaN (undefined, or timing failed) stored as null
-    if status in (PlanStatus.SUCCESS, PlanStatus.TIMING_FAILED) and planning_time_s > late_after_s(problem.time_limit_s):
-        # A solve that cannot be interrupted (SNOPT, a GCS solve, OMPL between its checks) may
-        # return a valid path after the budget: credited, it would measure the clock checks, not
-        # the planner.
-        status, metrics = PlanStatus.TIMEOUT, {}
-        stats["late_by_s"] = planning_time_s - problem.time_limit_s
-        stats["reason"] = (f"a valid path came {planning_time_s:.3g} s into a {problem.time_limit_s:g} s budget "
-                           "(it does not count)")
     record.update(
         status=status.value,
         planning_time_s=planning_time_s,

@@ -109,10 +109,12 @@ def test_tuning_sample_is_non_trivial_tune_split_problems_per_family():
     assert all(m["split"] == "tune" and not m["trivial"] for m in metas)
     families = [m["family"] for m in metas]
     assert all(families.count(f) <= 2 for f in set(families)) and len(set(families)) >= 5
-    test_ids = set(__import__("suite.problems.dataset", fromlist=["x"]).load_dataset("recycle-v1:quick").ids)
+    from suite.problems.dataset import load_dataset
+
+    test_ids = set(load_dataset("recycle-v1:quick").ids)
     assert not test_ids & {m["problem_id"] for m in metas}  # the quick tier (test split) is never tuned on
     _, everything = tuning_problems("recycle-v1", per_family=None, time_limit_s=1.0)  # the default: all
-    tune = __import__("suite.problems.dataset", fromlist=["x"]).load_dataset("recycle-v1:tune")
+    tune = load_dataset("recycle-v1:tune")
     assert len(everything) == sum(not tune.meta[pid]["trivial"] for pid in tune.ids) > len(problems)
 
 
