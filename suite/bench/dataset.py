@@ -24,6 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--first-seed", type=nonneg_int, default=50_000, help="first scene seed (default 50000)")
     p.add_argument("--cans", type=positive_int, default=5, help="cans per scene; clutter draws its own (default 5)")
     p.add_argument("--families", default=None, help="comma-separated families (default: all)")
+    p.add_argument("--no-bin-warm-start", action="store_true",
+                   help="pose bin goals without the previous cycle's warm start (as recycle-v1 and -v2 were built)")
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
@@ -42,7 +44,7 @@ def measure_loading(name: str, *, loads: int) -> dict:
             "ms_per_problem_max": round(max(per), 3)}
 
 
-def measure_generation(families, *, scenes: int, first_seed: int, cans: int) -> dict:
+def measure_generation(families, *, scenes: int, first_seed: int, cans: int, bin_warm_start: bool = True) -> dict:
     from scenes.errors import SuiteError
     from scenes.generate import generate_scene
     from scenes.grasp_rule import truth_grasp
@@ -61,7 +63,8 @@ def measure_generation(families, *, scenes: int, first_seed: int, cans: int) -> 
                 failed += 1
                 continue
             t1 = time.perf_counter()
-            build_problems(scene, [truth_grasp(scene, c) for c in scene.cans], time_limit_s=1.0, seed=seed)
+            build_problems(scene, [truth_grasp(scene, c) for c in scene.cans], time_limit_s=1.0, seed=seed,
+                           bin_warm_start=bin_warm_start)
             t2 = time.perf_counter()
             scene_s.append(t1 - t0)
             problems_s.append(t2 - t1)
@@ -80,14 +83,15 @@ def run(args: argparse.Namespace) -> int:
     families = args.families.split(",") if args.families else available_variants()
     figures = {"loading": measure_loading(args.dataset, loads=args.loads),
                "generation": measure_generation(families, scenes=args.scenes, first_seed=args.first_seed,
-                                                cans=args.cans)}
+                                                cans=args.cans, bin_warm_start=not args.no_bin_warm_start)}
     if args.json:
         print(json.dumps(figures))
         return 0
     ld = figures["loading"]
     print(f"loading {args.dataset}: {ld['problems']} problems, median {ld['ms_per_problem_median']} ms per problem "
           f"(max {ld['ms_per_problem_max']}; first load with imports {ld['first_load_s']} s)")
-    print(f"generating scenes from seed {args.first_seed} (seconds per scene: scene with its checks + problems' goal IK):")
+    warm = "without" if args.no_bin_warm_start else "with"
+    print(f"generating scenes from seed {args.first_seed}, bin goals {warm} the previous cycle's warm start (seconds per scene: scene with its checks + problems' goal IK):")
     print(f"{'family':10s} {'scenes':>6s} {'failed':>6s} {'scene':>7s} {'problems':>9s} {'total':>7s} {'max':>7s}")
     for fam, g in figures["generation"].items():
         print(f"{fam:10s} {g['scenes']:6d} {g['failed']:6d} {g['scene_s_median']!s:>7s} {g['problems_s_median']!s:>9s} "

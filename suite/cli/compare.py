@@ -288,7 +288,7 @@ def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, prog
 
         dataset = load_dataset(config.dataset)
         steps, orders = dataset.cycle_steps, dataset.picking_orders
-        shared = _shared_steps(trials, steps)
+        shared = _shared_steps(trials, steps, pose=pose_settings(dataset.manifest))
     jobs = jobs_from_records(trials, read_trials(out / TRIALS_FILE), grasps=config.grasps,
                              time_limit_s=config.time_limit_s, seed=config.seed, reperceive=reperceive,
                              replay_dir=out, cycle_steps=steps, shared_steps=shared, picking_orders=orders)
@@ -297,10 +297,11 @@ def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, prog
     write_execution(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar))
 
 
-def _shared_steps(trials, steps) -> dict:
+def _shared_steps(trials, steps, *, pose: dict) -> dict:
     """Cycle steps of the run's scenes stored in the dataset once, under another scene (identical
     content, e.g. the last return of a fixed station): (scene key, can id, kind) -> problem_id.
-    Found by posing each scene's cycle again (goal IK, as the dataset was built)."""
+    Found by posing each scene's cycle again (goal IK, as the dataset was built: `pose`, the
+    dataset's `pose_settings`)."""
     from scenes.grasp_rule import truth_grasp
     from suite.problems.cycle import build_problems
     from suite.problems.identity import problem_id
@@ -309,7 +310,8 @@ def _shared_steps(trials, steps) -> dict:
     planned = {(t.problem.scene.key(), t.problem.can_id, t.problem.kind) for t in trials}
     shared = {}
     for key, scene in scenes.items():
-        for p in build_problems(scene, [truth_grasp(scene, c) for c in scene.cans], time_limit_s=1.0, seed=scene.seed):
+        for p in build_problems(scene, [truth_grasp(scene, c) for c in scene.cans], time_limit_s=1.0, seed=scene.seed,
+                                **pose):
             k = (key, p.can_id, p.kind)
             if p.pre_status is None and k not in planned and k not in steps:
                 shared[k] = problem_id(p)

@@ -60,6 +60,9 @@ class BuildSettings:
         tune_every: every this-many-th scene of a family goes to the `tune` split.
         quick_problems: the `quick` tier's size (whole scenes, spread over the families).
         jobs: worker processes for the reference solutions.
+        bin_warm_start: pose each cycle's bin goal from the previous cycle's first
+            (`suite.problems.cycle.build_problems`); a manifest without this setting was built
+            without it (`pose_settings`).
     """
 
     name: str
@@ -73,6 +76,14 @@ class BuildSettings:
     tune_every: int = 5
     quick_problems: int = 120
     jobs: int = 2
+    bin_warm_start: bool = True
+
+
+def pose_settings(manifest: dict[str, Any]) -> dict[str, Any]:
+    """The `build_problems` keyword arguments a dataset's cycles were posed with (from its manifest),
+    to pose them again identically; datasets built before a setting existed were built without it."""
+    settings = manifest.get("build", {}).get("settings", {})
+    return {"bin_warm_start": bool(settings.get("bin_warm_start", False))}
 
 
 def family_spec(family: str, cans: int | None):
@@ -104,7 +115,7 @@ def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple
             try:
                 scene = generate_scene(spec, seed=seed)
                 problems = build_problems(scene, [truth_grasp(scene, c) for c in scene.cans],
-                                          time_limit_s=1.0, seed=seed)
+                                          time_limit_s=1.0, seed=seed, bin_warm_start=settings.bin_warm_start)
             except SuiteError as exc:
                 log.info("%s seed %d skipped: %s", family, seed, exc)
                 seed += 1
