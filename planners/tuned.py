@@ -29,7 +29,7 @@ OBJECTIVE: dict[str, str] = {
 #: tuning run must fit a session on 2 cores; the first value of each is the class default.
 SEARCH_SPACES: dict[str, dict[str, tuple]] = {
     "rrt": {"range_rad": (None, 1.0, 0.5), "simplifier": ("rope", "rope+full")},
-    "rrtstar": {"range_rad": (None, 1.0, 0.5), "resolution_rad": (0.01, 0.05)},
+    "rrtstar": {"range_rad": (None, 1.0, 0.5, 0.25), "goal_bias": (0.05, 0.2)},
     "bitstar": {"samples_per_batch": (100, 400), "range_rad": (None, 1.0)},
     "aorrtc": {"range_rad": (None, 1.0, 0.5)},
     "prm": {"max_nearest_neighbors": (10, 20), "range_rad": (None, 1.0)},
