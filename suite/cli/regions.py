@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _build_all(executor, jobs, items, out: Path, rows: list[dict], args, options) -> int:
-    """Run the world builds, saving each world's regions as it finishes; write build.json."""
+    """Run the world builds, saving each world's regions as it finishes; write the build's summary."""
     t0 = time.perf_counter()
     outcomes = executor.run(jobs)
     try:
@@ -151,6 +151,15 @@ def _record_world(k: int, outcome, items, out: Path, rows: list[dict]) -> None:
           f"({'/'.join(row['cache'])})", flush=True)
 
 
+def summary_name(selection: str) -> str:
+    """The summary file of a build of `selection` (NAME[:TIER[:FILTERS]]): one per tier and filters,
+    so that building regions for another tier of a dataset keeps the earlier build's figures."""
+    import re
+
+    rest = selection.partition(":")[2] or "all"
+    return "build-" + re.sub(r"[^A-Za-z0-9._=+-]+", "_", rest) + ".json"
+
+
 def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, items: list) -> int:
     built = [r for r in rows if any(c != "hit" for c in r["cache"])]
     per_region = [s for r in rows for s in r["region_build_s"]]
@@ -165,7 +174,7 @@ def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, i
         "size_bytes": sum(f.stat().st_size for f in out.glob("*.npz")),
         "worlds_detail": rows,
     }
-    (out / "build.json").write_text(json.dumps(summary, indent=1))
+    (out / summary_name(args.dataset)).write_text(json.dumps(summary, indent=1))
     if not rows:
         print(f"no world was built: each of the {len(items)} failed (see above)", file=sys.stderr)
         return 1

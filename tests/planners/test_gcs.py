@@ -141,7 +141,7 @@ def test_regions_build_cli_builds_once_per_world(tmp_path, capsys):
             "--jobs", "1", "--out", str(tmp_path)]
     assert main(argv) == 0
     (built,) = tmp_path.glob("*.npz")
-    summary = json.loads((tmp_path / "build.json").read_text())
+    summary = json.loads((tmp_path / "build-quick.json").read_text())
     assert summary["worlds"] == 1 and summary["worlds_built_now"] == 1 and summary["iris"] == "zo"
     assert summary["worlds_detail"][0]["world_hash"] == built.stem and summary["offline_s_median"] > 0
     capsys.readouterr()
