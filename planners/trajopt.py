@@ -11,6 +11,12 @@ segments between those samples are checked with the python-fcl world at `check_r
 (what the validator does), and where they collide, constraint samples are added at the colliding
 s values and the problem is re-solved from the previous solution, until the path is free or the
 budget (`problem.time_limit_s`, `max_resolves`) runs out.
+
+SNOPT cannot be interrupted from outside and Drake's build ignores its "Time limit" option, so a
+solve started before the deadline used to run on past it (up to 3 s over a 5 s budget, 40 of 74
+CPU-seconds on the quick tier's `window` problems at a 1 s budget). The program carries a callback,
+evaluated with the costs and constraints, that raises once the deadline has passed: Drake then
+aborts the solve, and the trial ends as a TIMEOUT at its budget (a path that late would not count).
 """
 
 from __future__ import annotations
@@ -106,6 +112,10 @@ class TrajoptConfig:
                 raise SuiteError(f"trajopt {name}={getattr(self, name)!r} must be positive")
         if self.influence_distance_m <= self.min_distance_m:
             raise SuiteError("trajopt influence_distance_m must exceed min_distance_m")
+
+
+class _OutOfTime(Exception):
+    """Raised inside SNOPT's evaluations once a trial's deadline has passed (aborts the solve)."""
 
 
 def colliding_s(world, path: np.ndarray, s: np.ndarray, *, resolution_rad: float) -> np.ndarray:
@@ -229,6 +239,14 @@ class TrajoptPlanner:
             ctrl = np.linspace(q_start, q_goal, cfg.num_control_points)
         trajopt.SetInitialGuess(BsplineTrajectory(trajopt.basis(), [c[:, None] for c in ctrl]))
 
+        out_of_time = []
+
+        def stop_at_deadline(_x) -> None:  # evaluated with every cost and constraint evaluation
+            if time.perf_counter() >= deadline:
+                out_of_time.append(True)
+                raise _OutOfTime
+
+        prog.AddVisualizationCallback(stop_at_deadline, prog.decision_variables())
         solver = SnoptSolver()
         options = SolverOptions()
         options.SetOption(SnoptSolver.id(), "Major iterations limit", cfg.major_iterations)
@@ -241,7 +259,14 @@ class TrajoptPlanner:
         for attempt in range(cfg.max_resolves + 1):
             if attempt > 0:
                 prog.SetInitialGuess(prog.decision_variables(), result.GetSolution(prog.decision_variables()))
-            result = solver.Solve(prog, None, options)
+            try:
+                result = solver.Solve(prog, None, options)
+            except RuntimeError:
+                if not out_of_time:
+                    raise
+                stats.update(resolves=attempt, constraint_samples=len(samples), solve_interrupted=True,
+                             solve_time_s=time.perf_counter() - t0, reason="time limit reached")
+                return PlanResult(PlanStatus.TIMEOUT, None, stats)
             stats["resolves"] = attempt
             stats["solver_status"] = result.get_solution_result().name
             stats["snopt_info"].append(int(result.get_solver_details().info))

@@ -38,6 +38,16 @@ def test_transit_is_solved_collision_free(variant, open_transit, wall_transit):
     assert s["cost"] > 0 and 0 < s["solve_time_s"] < p.time_limit_s + 1.0
 
 
+def test_a_solve_running_past_the_budget_is_stopped_there(wall_transit):
+    # SNOPT's first solve of this transit takes some 0.3 s; with a 0.05 s budget it used to run to
+    # its end (and re-solves beyond), now the deadline callback aborts it
+    p = wall_transit.with_(time_limit_s=0.05)
+    r = make_planner("trajopt").plan(p)
+    assert r.status is PlanStatus.TIMEOUT and r.path is None, r.stats
+    assert r.stats["solve_interrupted"] and r.stats["reason"] == "time limit reached"
+    assert r.stats["solve_time_s"] < 0.05 + 0.25
+
+
 def test_straight_line_through_the_wall_is_caught(wall_transit):
     world = collision_world(wall_transit)
     line = np.linspace(wall_transit.q_start, wall_transit.q_goal, 100)
