@@ -63,9 +63,8 @@ class TrajoptConfig:
         check_resolution_rad: joint resolution of the dense python-fcl check.
         max_resolves: re-solves after the first solve.
         samples_per_hit: constraint samples added per colliding stretch of s.
-        major_iterations: SNOPT major iteration limit per solve. A solve cannot be interrupted
-            (SNOPT's "Time limit" option is not honoured by Drake's build), so the budget is
-            checked between solves and this bounds one solve (roughly 20-40 ms per iteration).
+        major_iterations: SNOPT major iteration limit per solve (roughly 20-40 ms per
+            iteration); the budget stops a solve in its course (see the module's docstring).
         via_position_tolerance_m, via_orientation_tolerance_rad: tolerances of the via point's IK
             (the paper's loose transit tolerances).
     """

@@ -285,6 +285,7 @@ def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, prog
     steps, shared, orders = None, None, None
     if config.dataset:
         from suite.problems.dataset import load_dataset
+        from suite.run.build_dataset import pose_settings
 
         dataset = load_dataset(config.dataset)
         steps, orders = dataset.cycle_steps, dataset.picking_orders
