@@ -263,9 +263,8 @@ class TrajoptPlanner:
             except RuntimeError:
                 if not out_of_time:
                     raise
-                stats.update(resolves=attempt, constraint_samples=len(samples), solve_interrupted=True,
-                             solve_time_s=time.perf_counter() - t0, reason="time limit reached")
-                return PlanResult(PlanStatus.TIMEOUT, None, stats)
+                stats.update(resolves=attempt, solve_interrupted=True)
+                break  # past the deadline: the TIMEOUT below
             stats["resolves"] = attempt
             stats["solver_status"] = result.get_solution_result().name
             stats["snopt_info"].append(int(result.get_solver_details().info))

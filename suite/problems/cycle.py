@@ -116,8 +116,9 @@ def build_problems(
     removed: tuple[int, ...] = ()
     rng = np.random.default_rng([seed, 7919])
 
-    def solve(X, q_seed, *, opening, held=None, removed=()):
-        return ik.solver(opening=opening, held=held, removed=removed).solve(X, q_seed=q_seed, rng=rng)
+    def solve(X, q_seed, *, opening, held=None, removed=(), options=IkOptions()):
+        return ik.solver(opening=opening, held=held, removed=removed).solve(X, q_seed=q_seed, rng=rng,
+                                                                            options=options)
 
     def solve_via(poses, q_seed, *, opening, held=None, removed=()):
         """IK of the last pose, reached by continuation along the earlier ones: each is solved
@@ -158,8 +159,7 @@ def build_problems(
         # random restart landed on a flipped elbow or wrist that no motion along the path reaches.
         q_bin = None
         if q_lift is not None and bin_warm_start and q_bin_before is not None:
-            q_bin = ik.solver(opening=closed, held=held, removed=removed_after).solve(
-                X_bin, q_seed=q_bin_before, rng=rng, options=WARM_BIN)
+            q_bin = solve(X_bin, q_bin_before, opening=closed, held=held, removed=removed_after, options=WARM_BIN)
         if q_lift is not None and q_bin is None:
             via = [*between(X_plate, X_middle, 2), X_middle, *between(X_middle, X_bin, 2), X_bin]
             q_bin = solve_via(via, q_lift, opening=closed, held=held, removed=removed_after)
