@@ -288,6 +288,7 @@ def run_jobs(jobs: Sequence[ExecutionJob], *, workers: int, progress_bar: bool =
 
     from tqdm import tqdm
 
+    from suite.run.interrupt import signals_blocked
     from suite.run.runner import worker_init
 
     results: list[dict[str, Any] | None] = [None] * len(jobs)
@@ -301,7 +302,8 @@ def run_jobs(jobs: Sequence[ExecutionJob], *, workers: int, progress_bar: bool =
     else:
         with cf.ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("spawn"),
                                     initializer=worker_init) as pool:
-            futures = {pool.submit(_guarded, job): i for i, job in enumerate(jobs)}
+            with signals_blocked():  # the pool spawns its workers as jobs are submitted
+                futures = {pool.submit(_guarded, job): i for i, job in enumerate(jobs)}
             for fut in cf.as_completed(futures):
                 i = futures[fut]
                 try:

@@ -117,9 +117,9 @@ class DaskExecutor:
             from suite.run.executors import cap_workers
             from suite.run.interrupt import signals_blocked
 
-            # The cluster's processes (and the loop thread that starts them) inherit a mask with
-            # SIGINT/SIGTERM blocked: the terminal's Ctrl-C reaches this process alone, which
-            # closes the cluster.
+            # The cluster's processes start with SIGINT/SIGTERM ignored (and the loop thread that
+            # starts them with both blocked): the terminal's Ctrl-C reaches this process alone,
+            # which closes the cluster.
             with signals_blocked():
                 cluster = LocalCluster(n_workers=cap_workers(self.n_workers, n_jobs), threads_per_worker=1,
                                        processes=True, host=self.host, dashboard_address=None,

@@ -90,7 +90,7 @@ class _Worker:
 
         self.conn, child = ctx.Pipe()
         self.proc = ctx.Process(target=_worker_main, args=(child, init), daemon=True)
-        with signals_blocked():  # the child starts with SIGINT/SIGTERM blocked (inherited mask)
+        with signals_blocked():  # the child starts with SIGINT/SIGTERM ignored
             self.proc.start()
         child.close()
         self.job: Job | None = None

@@ -7,8 +7,9 @@ arrives while a record is being written (`critical()`) is held until the write i
 record is torn by it. A second signal ends the process at once: the worker processes this process
 started are killed and it exits with 128 + the signal's number.
 
-Worker processes never see the terminal's Ctrl-C: they are started with SIGINT and SIGTERM blocked
-(`signals_blocked()`; a spawned child inherits the mask) and ignore both, and the parent kills them.
+Worker processes never see the terminal's Ctrl-C: they are started with SIGINT and SIGTERM ignored
+(`signals_blocked()`: a spawned child inherits ignored signals across exec, though not the parent's
+blocked mask) and keep ignoring both, and the parent kills them.
 """
 
 from __future__ import annotations
@@ -144,13 +145,21 @@ def _stop_resource_tracker() -> None:
 
 @contextlib.contextmanager
 def signals_blocked() -> Iterator[None]:
-    """Block SIGINT and SIGTERM in this thread while starting processes: a spawned child inherits
-    the blocked mask, so not even its start-up imports can be interrupted by the terminal's Ctrl-C.
-    A signal that arrives meanwhile is delivered to this process when the block ends."""
+    """Start processes inside this: SIGINT and SIGTERM are blocked in this thread and, in the main
+    thread, ignored meanwhile, so that a spawned child starts with both ignored and not even its
+    start-up imports can be interrupted by the terminal's Ctrl-C. (A spawned child does not inherit
+    the blocked mask: Python's fork-exec clears it; it does inherit ignored signals, and Python keeps
+    an ignored SIGINT ignored.) A signal that arrives meanwhile stays pending, blocked, and is
+    delivered to this process's own handler when the block ends."""
     old = signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)
+    handlers = {}
     try:
+        if threading.current_thread() is threading.main_thread():
+            handlers = {s: signal.signal(s, signal.SIG_IGN) for s in SIGNALS}
         yield
     finally:
+        for s, handler in handlers.items():
+            signal.signal(s, handler)  # before unblocking: a pending signal goes to the handler
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
