@@ -14,6 +14,7 @@ TARGETS = {
     "execution": "suite.bench.execution",
     "dataset": "suite.bench.dataset",
     "regions": "suite.bench.regions",
+    "single-tree": "suite.bench.single_tree",
 }
 
 
