@@ -67,14 +67,15 @@ def plot_success_by_family(records: Sequence[dict], *, planners: Sequence[str], 
 
 def plot_length_ratio_by_family(records: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path:
     """Per family, each planner's length ratio (joint path / the problem's best known), one dot per
-    solved distinct problem, with its median as a bar; 1 is the reference."""
+    solved distinct problem, with its median as a bar; 1 is the reference, and the axis reaches
+    down to any ratio below it (a path shorter than the reference)."""
     colors = planner_colors(planners)
     groups = _families(records)
     width = 0.8 / max(len(planners), 1)
     fig, ax = plt.subplots(figsize=(max(6.5, 1.1 * len(groups) * max(len(planners), 2) * 0.55 + 2), 4.6))
     rng = np.random.default_rng(0)  # jitter only
     any_value = False
-    top = 1.0
+    top = bottom = 1.0
     for i, p in enumerate(planners):
         for j, fam in enumerate(groups):
             vals = np.array([o.metrics["length_ratio"] for o in _per_family(records, p, fam, ("length_ratio",))])
@@ -85,6 +86,7 @@ def plot_length_ratio_by_family(records: Sequence[dict], *, planners: Sequence[s
                 continue
             any_value = True
             top = max(top, float(np.max(vals)))
+            bottom = min(bottom, float(np.min(vals)))  # a planner that beat the reference
             ax.scatter(xc + rng.uniform(-width * 0.3, width * 0.3, len(vals)), vals, s=10, color=colors[p],
                        alpha=0.8, linewidths=0, zorder=3)
             med = float(np.median(vals))
@@ -92,8 +94,9 @@ def plot_length_ratio_by_family(records: Sequence[dict], *, planners: Sequence[s
     ax.axhline(1.0, color="0.3", linestyle="--", linewidth=1)
     ax.set_xticks(np.arange(len(groups)), groups)
     ax.set_yscale("log")
-    ax.set_ylim(0.9, max(2.0, top * 1.3))
-    ticks = [t for t in (1, 1.25, 1.5, 2, 3, 5, 10, 20, 50) if t <= max(2.0, top * 1.3)]
+    low, high = min(0.9, bottom / 1.15), max(2.0, top * 1.3)
+    ax.set_ylim(low, high)
+    ticks = [t for t in (0.1, 0.25, 0.5, 0.75, 1, 1.25, 1.5, 2, 3, 5, 10, 20, 50) if low <= t <= high]
     ax.set_yticks(ticks, [f"{t:g}" for t in ticks])
     ax.yaxis.set_minor_formatter(NullFormatter())
     ax.set_ylabel("length / reference (log; 1 = best known)")
