@@ -28,7 +28,7 @@ from suite.report.summary_stats import (
     paired_comparisons,
     summarize_run,
 )
-from suite.report.summary_tables import summary_markdown
+from suite.report.summary_tables import certification_counts, summary_markdown
 from suite.run.records import STATUSES, planners_in, problem_counts
 
 log = logging.getLogger(__name__)
@@ -59,7 +59,8 @@ def summary_json(
     """The machine-readable summary: the same numbers as summary.md, NaN written as null.
 
     Keys: distinct_problems, scenes, trivial_problems, few_problems (fewer than FEW_PROBLEMS),
-    planners: {NAME: {success: {k, n, rate, ci95, trials}, status_counts, metrics: {METRIC: {median,
+    planners: {NAME: {success: {k, n, rate, ci95, trials}, status_counts, certification: {certified,
+    unproved, collision, not checked} (successful trials by exact verdict), metrics: {METRIC: {median,
     q1, q3, n}}, time_to_solve_s, common_subset: {METRIC: {median, n}}, by_family: {FAMILY: {success,
     metrics}}, by_kind: {KIND: {success, metrics}}}}, metrics (their definitions), paired: [...].
     """
@@ -82,6 +83,7 @@ def summary_json(
         out["planners"][p] = {
             "success": _success_json(g),
             "status_counts": g.status_counts,
+            "certification": certification_counts(records, p),
             "metrics": {m: _stats_json(g.metrics[m]) for m in SUMMARY_METRICS},
             TIME_TO_SOLVE: _stats_json(g.time_to_solve),
             "common_subset": {m: {"median": _num(common[m][p].median), "n": common[m][p].n} for m in SUMMARY_METRICS},

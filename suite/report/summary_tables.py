@@ -78,8 +78,19 @@ def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] 
     metric, over distinct problems, then the composition line (and its warning when too few)."""
     if not records:
         return "no trial records"
-    headers, rows = _rows(summarize(records, planners=planners), key=None)
-    return tabulate(rows, headers=headers, tablefmt="simple") + "\n" + composition(records)
+    groups = summarize(records, planners=planners)
+    headers, rows = _rows(groups, key=None)
+    return (tabulate(rows, headers=headers, tablefmt="simple") + "\n" + composition(records) + "\n"
+            + certification_line(records, [g.planner for g in groups]))
+
+
+def certification_line(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:
+    """One line: per planner, its successes by exact verdict."""
+    parts = []
+    for p in planners:
+        c = certification_counts(records, p)
+        parts.append(f"{p} " + ", ".join(f"{c[v]} {v}" for v in (*VERDICTS, "not checked") if c[v] or v == "certified"))
+    return "Exact verdict of the successes (docs/certification.md): " + "; ".join(parts) + "."
 
 
 def composition(records: Sequence[dict[str, Any]]) -> str:
@@ -93,6 +104,38 @@ def composition(records: Sequence[dict[str, Any]]) -> str:
         line += (f" WARNING: fewer than {FEW_PROBLEMS} distinct problems: too few to tell planners apart; "
                  "read every figure as anecdotal.")
     return line
+
+
+#: The exact verdicts of `scenes.fcl_certify`, in table order; "not checked": a record written
+#: before certification existed.
+VERDICTS = ("certified", "unproved", "collision")
+
+
+def certification_counts(records: Sequence[dict[str, Any]], planner: str) -> dict[str, int]:
+    """Per verdict, the planner's successful trials (the 0.01 rad rule) with that exact verdict."""
+    out = dict.fromkeys((*VERDICTS, "not checked"), 0)
+    for r in records:
+        if r.get("planner") == planner and r.get("status") == SUCCESS:
+            verdict = (r.get("certification") or {}).get("verdict", "not checked")
+            out[verdict] = out.get(verdict, 0) + 1
+    return out
+
+
+def _certification_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+    headers = ["planner", "successes (0.01 rad)", *VERDICTS, "not checked"]
+    rows = []
+    for p in planners:
+        c = certification_counts(records, p)
+        rows.append([p, sum(c.values()), *(c[v] for v in VERDICTS), c["not checked"]])
+    return headers, rows
+
+
+CERTIFICATION_INTRO = (
+    "Success is the field's rule: the path is free at every state sampled with at most 0.01 rad of joint "
+    "motion between states (OMPL's and MoveIt's benchmarks use such a rule). Beside it, each successful path "
+    "gets an exact verdict (docs/certification.md): `certified` (every straight segment proved free by distance "
+    "bounds and bisection: nothing can collide between samples), `collision` (a state between the samples "
+    "collides), `unproved` (a segment shorter than 1e-6 rad still unproved: a graze within micrometres).")
 
 
 def _failure_rows(groups: Sequence[GroupSummary], statuses: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
@@ -149,6 +192,8 @@ def summary_markdown(
                "Medians over the distinct problems that every planner solved (n of them per metric): "
                "no planner is flattered by skipping the hard ones.", ""]
         md.append(tabulate(*reversed(_common_rows(summary.common, planners)), tablefmt="github"))
+    md += ["", "## Certified paths (successful trials)", "", CERTIFICATION_INTRO, ""]
+    md.append(tabulate(*reversed(_certification_rows(records, planners)), tablefmt="github"))
     md += ["", "## Failures by status (trials)", ""]
     md.append(tabulate(*reversed(_failure_rows(summary.overall, statuses_in(records))), tablefmt="github"))
     md += ["", "## Per planner and problem kind", ""]

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus
-from suite.scoring.validate import validate_path
+from suite.scoring.validate import certify_path, structure_reason, validate_path
 
 log = logging.getLogger(__name__)
 
@@ -218,14 +218,19 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
         planning_time_s: the planner's wall time, s.
 
     Returns:
-        The record, with status, planning_time_s, path, metrics and stats.
+        The record, with status, planning_time_s, path, metrics, certification (the exact
+        verdict of every claimed path that has the right shape, ends and limits; None otherwise)
+        and stats.
     """
     problem = spec.problem
     status = PlanStatus(result.status)
     stats = dict(result.stats)
     path = None if result.path is None else np.asarray(result.path, float).round(10)
     metrics: dict[str, float] = {}
+    certification = None
     if status == PlanStatus.SUCCESS:
+        if structure_reason(problem, path, world) is None:  # the exact verdict, beside the 0.01 rad rule
+            certification = certify_path(path, world)
         reason = validate_path(problem, path, world)
         if reason is not None:
             status = PlanStatus.INVALID_SOLUTION
@@ -256,6 +261,7 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
         path=None if path is None or status not in (PlanStatus.SUCCESS, PlanStatus.TIMING_FAILED)
         else path.tolist(),
         metrics=metrics,
+        certification=certification,
         stats=_jsonable(stats),
     )
     return record
