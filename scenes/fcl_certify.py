@@ -26,9 +26,10 @@ eta, in three tiers, cheapest first:
    sphere pairs is.
 2. Joint tables (`scenes.fcl_tables`): a self pair whose distance depends on one joint only is
    proved apart cell by cell; a segment whose joint interval stays in proved cells is free.
-3. Exact python-fcl distances between the two primitives at both ends, with the body pair's
-   lambda (the largest over its spheres, plus their radius). FCL's GJK distance may exceed the
-   true one by its tolerance: EXACT_SLACK_M is taken off every exact distance.
+3. Proved distances between the two primitives at both ends, with the body pair's lambda (the
+   largest over its spheres, plus their radius). FCL's GJK distance is only an estimate (seen
+   0.3 mm above the truth between two cylinders); a fraction of it is proved by FCL's collide() on
+   the moving primitive grown by that much (`Certifier._exact`).
 
 The verdict of a path: `certified` (every segment proved free), `collision` (a state in
 collision, by FCL's collide(), with the segment, the position on it, the pair and the depth from
@@ -47,12 +48,16 @@ from typing import Any
 import fcl
 import numpy as np
 
+from scenes.fcl_shapes import fcl_geometry
 from scenes.fcl_tables import APART
 
 #: Bisection stops on a segment shorter than this (max-norm, rad): the pair is `unproved` there.
 FLOOR_RAD = 1e-6
-#: Taken off every exact FCL distance (m): GJK's result may exceed the true distance by its tolerance.
-EXACT_SLACK_M = 1e-6
+#: An FCL distance d is proved as a lower bound f d for the first of these fractions f that a
+#: collision query with the grown part confirms (`Certifier._exact`).
+PROOF_FRACTIONS = (0.95, 0.7, 0.3)
+#: Taken off the sum of two proved distances: rounding in the bound's arithmetic (m).
+EXACT_SLACK_M = 1e-9
 #: A segment is cut into at most this many pieces at once (as many as its ends' bounds ask for).
 MAX_PIECES = 16
 #: At most this many configurations are evaluated for one path; beyond, the verdict is `unproved`.
@@ -60,6 +65,20 @@ MAX_STATES = 200_000
 
 CERTIFIED, COLLISION, UNPROVED = "certified", "collision", "unproved"
 VERDICTS = (CERTIFIED, COLLISION, UNPROVED)
+
+
+def grown_dims(kind: str, dims, delta_m: float) -> tuple:
+    """The dimensions of a primitive grown so that it contains every point within delta_m of it
+    (a negative delta_m erodes it: the points at least |delta_m| inside)."""
+    if kind == "box":
+        return tuple(float(x) + 2 * delta_m for x in dims)
+    if kind == "cylinder":
+        return (dims[0] + delta_m, dims[1] + 2 * delta_m)
+    if kind == "capsule":
+        return (dims[0] + delta_m, dims[1])
+    if kind == "sphere":
+        return (dims[0] + delta_m,)
+    raise ValueError(f"unsupported shape {kind!r}")
 
 
 def point_axis_radii(robot, p_L: np.ndarray, link: int) -> np.ndarray:
@@ -87,7 +106,8 @@ class Certificate:
         states: configurations whose bounds were evaluated (waypoints and bisection midpoints).
         distance_queries: exact python-fcl distance queries.
         time_s: wall time of the check.
-        detail: for `collision`: segment, position t on it (0..1), pair, penetration_m (>= 0),
+        detail: for `collision`: segment, position t on it (0..1), pair, penetration_m (>= 0: how
+            deep the other body reaches into the moving one, to 1 um),
             q; for `unproved`: segment, t, pair, clearance_m there, why.
         min_segment_rad: the shortest segment a proof needed (max-norm, rad).
     """
@@ -135,6 +155,7 @@ class Certifier:
         self._centres = centres
         self._centre_link = row_link[centres]
         self._chain = np.array([point_axis_radii(robot, w._rows0[r, :3], row_link[r]) for r in centres])
+        self._moves = (np.arange(7)[None, :] < self._centre_link[:, None]).astype(float)  # joint j moves centre c
         order = np.argsort(pp, kind="stable")
         self._sp_pp = pp[order]
         self._sp_R = R[order]
@@ -178,7 +199,6 @@ class Certifier:
             self._pp_cpad[k, : len(c)], self._pp_Rpad[k, : len(c)] = c, r
         self._pp_j = np.array(self._pp_j, int)
         self._dreq = fcl.DistanceRequest()
-        self._sreq = fcl.DistanceRequest(enable_signed_distance=True)
         self._creq = fcl.CollisionRequest()
 
     # --- bounds -----------------------------------------------------------------------------------
@@ -189,15 +209,21 @@ class Certifier:
         not move it."""
         w = self.world
         rows = w._batch_rows(Q)
-        D = np.abs(rows[:, self._sp_ia] - rows[:, self._sp_ib])
-        D -= self._sp_H
-        np.maximum(D, 0.0, out=D)
-        eta = np.sqrt(np.einsum("msk,msk->ms", D, D)) - self._sp_R
+        m, n = rows.shape[:2]
+        flat = rows.reshape(m * n, 3)
+        off = (n * np.arange(m))[:, None]
+        G = np.abs(flat.take((self._sp_ia[None, :] + off).ravel(), axis=0)
+                   - flat.take((self._sp_ib[None, :] + off).ravel(), axis=0))  # row gathers: fast
+        G -= np.tile(self._sp_H, (m, 1))
+        np.maximum(G, 0.0, out=G)
+        G *= G
+        eta = np.sqrt(G.sum(axis=1)).reshape(m, -1) - self._sp_R
         X = self.robot.link_poses(Q)[:, 1:8]  # link j's frame: its z axis is joint j's axis
-        p = rows[:, self._centres][:, :, None, :] - X[:, None, :, :3, 3]  # (M, C, 7, 3)
-        along = np.einsum("mcjk,mjk->mcj", p, X[:, :, :3, 2])  # |z| = 1: |p x z|^2 = |p|^2 - (p.z)^2
-        D = np.sqrt(np.maximum(np.einsum("mcjk,mcjk->mcj", p, p) - along * along, 0.0))
-        D[:, self._chain == 0.0] = 0.0
+        c = flat.take((self._centres[None, :] + off).ravel(), axis=0).reshape(m, -1, 1, 3)
+        p = c - X[:, None, :, :3, 3]  # (M, C, 7, 3)
+        along = (p * X[:, None, :, :3, 2]).sum(axis=-1)  # |z| = 1: |p x z|^2 = |p|^2 - (p.z)^2
+        D = np.sqrt(np.maximum((p * p).sum(axis=-1) - along * along, 0.0))
+        D *= self._moves
         return rows, eta, D
 
     def _reach(self, dq: np.ndarray, Da: np.ndarray, Db: np.ndarray) -> np.ndarray:
@@ -229,22 +255,52 @@ class Certifier:
         return np.max(reach + self._pp_Rpad[k] * extra[:, None], axis=1)
 
     def _exact(self, k: int, rows: np.ndarray) -> float:
-        """FCL distance (m) of body pair k in a state's world rows; in collision (FCL's collide()),
-        minus the penetration depth, or -0.0 for a contact of no depth."""
+        """A proved lower bound (m) on body pair k's distance in a state's world rows; in
+        collision (FCL's collide()), minus how deep the other body reaches into the moving part
+        (`_reach_inside`), or -0.0 for a contact of no depth.
+
+        FCL's GJK distance is an estimate (on cylinders it was seen 0.3 mm above the truth), so it
+        is not used as a bound. It proposes one: delta = f d for f in PROOF_FRACTIONS, proved by
+        FCL's collide() finding the moving part grown by delta (a box by delta on every side, a
+        cylinder or capsule in radius and a cylinder in length, which contains every point within
+        delta of it) apart from the other body: GJK separates convex shapes only with a
+        separating direction, a certificate. 0 when no fraction is proved.
+        """
         w = self.world
         i = w._pp_part[k]
         j, other = w._pp_other[k]
         a = w._place(i, rows)
         b = other if other is not None else w._place(j, rows)
         d = float(fcl.distance(a, b, self._dreq, fcl.DistanceResult()))  # -1 when they collide
-        if d > 1e-9:
-            return d
-        if fcl.collide(a, b, self._creq, fcl.CollisionResult()):
-            return -abs(min(float(fcl.distance(a, b, self._sreq, fcl.DistanceResult())), 0.0))
-        return max(d, 0.0)
+        part = w.parts[i]
+        X = fcl.Transform(a.getRotation(), a.getTranslation())
+        if d <= 1e-9:
+            if fcl.collide(a, b, self._creq, fcl.CollisionResult()):
+                return -self._reach_inside(part, X, b)
+            return 0.0
+        for f in PROOF_FRACTIONS:
+            grown = fcl.CollisionObject(fcl_geometry(part.kind, grown_dims(part.kind, part.dims, f * d)), X)
+            if not fcl.collide(grown, b, self._creq, fcl.CollisionResult()):
+                return f * d
+        return 0.0
+
+    def _reach_inside(self, part, X, other) -> float:
+        """How deep (m) `other` reaches into a part placed at X that it collides with: the
+        largest delta (to a micrometre) for which the part eroded by delta
+        still collides. (FCL's signed distance, EPA, aborts the process on some cylinder pairs.)"""
+        lo, hi = 0.0, min(part.dims[: 1 if part.kind != "box" else 3]) / (1 if part.kind != "box" else 2)
+        while hi - lo > 1e-6:
+            mid = 0.5 * (lo + hi)
+            shrunk = fcl.CollisionObject(fcl_geometry(part.kind, grown_dims(part.kind, part.dims, -mid)), X)
+            if fcl.collide(shrunk, other, self._creq, fcl.CollisionResult()):
+                lo = mid
+            else:
+                hi = mid
+        return lo
 
     def exact_distance(self, k: int, q: np.ndarray) -> float:
-        """FCL distance (m) of body pair k at configuration q (7,); negative in penetration."""
+        """`_exact` of body pair k at configuration q (7,): a proved lower bound on its distance
+        (m), or minus how deep the other body reaches into the moving part."""
         return self._exact(k, self.world._batch_rows(np.asarray(q, float)[None])[0])
 
     def _tables_apart(self, qa: np.ndarray, qb: np.ndarray, failing: np.ndarray) -> None:

@@ -15,6 +15,7 @@ TARGETS = {
     "dataset": "suite.bench.dataset",
     "regions": "suite.bench.regions",
     "single-tree": "suite.bench.single_tree",
+    "certify": "suite.bench.certify",
 }
 
 

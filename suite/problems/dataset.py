@@ -324,10 +324,12 @@ def dataset_scene(name: str, scene_key: str) -> Scene:
 
 def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
     """Re-derive every problem's content hash and record hash, re-validate every reference with
-    the validator, and check the dataset hash. Raises SuiteError naming the first problem that
-    fails."""
+    the validator, give every benchmark reference its exact verdict (`certify_path`), and check
+    the dataset hash. A dataset whose manifest says `references_certified` must have every
+    benchmark reference certified; older ones get the counts. Raises SuiteError naming the first
+    problem that fails."""
     from planners.worlds import collision_world
-    from suite.scoring.validate import validate_path
+    from suite.scoring.validate import certify_path, validate_path
 
     directory = dataset_dir(name)
     manifest = read_manifest(directory)
@@ -337,6 +339,8 @@ def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
         if scenes[rec["scene_key"]].key() != rec["scene_key"]:
             raise SuiteError(f"dataset {name!r}: scene {rec['scene_key']} does not hash to its key (edited?)")
     records = _read_jsonl(directory / PROBLEMS_FILE)
+    must_certify = bool(manifest.get("references_certified"))
+    verdicts = {"certified": 0, "unproved": 0, "collision": 0}
     for i, (lineno, _, rec) in enumerate(records):
         pid = rec.get("problem_id")
         if record_hash(rec) != rec.get("record_hash"):
@@ -349,6 +353,12 @@ def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
         reason = validate_path(problem, path, world)
         if reason is not None:
             raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): reference rejected: {reason}")
+        if rec.get("benchmark", True):
+            cert = certify_path(path, world)
+            verdicts[cert["verdict"]] += 1
+            if must_certify and cert["verdict"] != "certified":
+                raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): reference not certified: "
+                                 f"{cert['verdict']} on segment {cert.get('segment')} ({' vs '.join(cert.get('pair', []))})")
         length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
         if abs(length - rec["reference_length_rad"]) > 1e-6:
             raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): reference length {length:.6f} "
@@ -359,7 +369,8 @@ def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
     if h != manifest.get("hash"):
         raise SuiteError(f"dataset {name!r}: dataset hash {h} != manifest's {manifest.get('hash')}")
     bench = sum(1 for _, _, rec in records if rec.get("benchmark", True))
-    return {"scenes": len(scene_rows), "problems": bench, "cycle_steps": len(records) - bench}
+    return {"scenes": len(scene_rows), "problems": bench, "cycle_steps": len(records) - bench,
+            "references": verdicts, "references_must_be_certified": must_certify}
 
 
 def summary(ds: Dataset) -> dict[str, Any]:

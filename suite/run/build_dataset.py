@@ -6,8 +6,9 @@ Steps:
 2. Identical problems (same content hash) are kept once. Each is checked for triviality (the
    straight joint segment passes the validator) and its difficulty measured.
 3. Every problem gets a reference solution, the shortest valid path known: for a trivial problem
-   the straight segment (no path is shorter); otherwise the best of a long AORRTC run and a few
-   RRT-Connect runs, each shortened by OMPL's simplifier and checked by the validator. A problem
+   the straight segment (no path is shorter) if it is certified; otherwise the best of a long
+   AORRTC run and a few RRT-Connect runs, each shortened by OMPL's simplifier, accepted by the
+   validator and certified by the exact check (`scenes.fcl_certify`). A problem
    no planner solves is left out (the dataset holds known-solvable problems only).
 4. Trivial problems are capped at `max_trivial_fraction` per family (those kept are chosen by
    hash, not by seed order); the others stay in the files as cycle steps (`benchmark: false`), not
@@ -130,8 +131,11 @@ def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple
                     continue
                 seen.add(pid)
                 line = straight_line(p)
-                out.append((pid, p, {"trivial": line.trivial, "difficulty": round(line.collision_fraction, 6),
-                                "straight_length_rad": line.length_rad, "split": split}))
+                meta = {"trivial": line.trivial, "difficulty": round(line.collision_fraction, 6),
+                        "straight_length_rad": line.length_rad, "split": split}
+                if line.trivial:  # the straight witness must be certified too; if not, one is planned
+                    meta["straight_certified"] = straight_certified(p)
+                out.append((pid, p, meta))
             made += 1
             seed += 1
             if progress is not None:
@@ -139,12 +143,22 @@ def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple
     return scene_recs, out
 
 
+def straight_certified(problem) -> bool:
+    """True if the exact check certifies the problem's straight joint segment."""
+    from planners.worlds import collision_world
+    from suite.scoring.validate import certify_path
+
+    path = np.array([problem.q_start, problem.q_goal], float)
+    return certify_path(path, collision_world(problem))["verdict"] == "certified"
+
+
 def reference_job(arg: tuple) -> dict[str, Any]:
-    """The shortest valid path found for one non-trivial problem (runs in a worker process)."""
+    """The shortest path found for one non-trivial problem that the validator accepts and the exact
+    check certifies (`suite.scoring.validate.certify_path`); runs in a worker process."""
     from planners.registry import make_planner, planner_class
     from planners.worlds import collision_world
     from suite.run.trial import make_config
-    from suite.scoring.validate import validate_path
+    from suite.scoring.validate import certify_path, validate_path
 
     problem, budget_s, rrt_runs = arg
     world = collision_world(problem)
@@ -159,9 +173,13 @@ def reference_job(arg: tuple) -> dict[str, Any]:
         if result.path is None or validate_path(problem, result.path, world) is not None:
             tried.append({"planner": name, "status": result.status.value, "time_s": round(elapsed, 3)})
             continue
-        path = np.asarray(result.path, float)
+        path = np.asarray(result.path, float).round(12)  # certified as it is stored
         length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
-        tried.append({"planner": name, "status": "success", "length_rad": round(length, 6), "time_s": round(elapsed, 3)})
+        verdict = certify_path(path, world)["verdict"]
+        tried.append({"planner": name, "status": "success", "length_rad": round(length, 6), "time_s": round(elapsed, 3),
+                      "certification": verdict})
+        if verdict != "certified":  # a witness must be free between the validator's samples too
+            continue
         if best is None or length < best["length_rad"]:
             best = {"path": path.round(12).tolist(), "length_rad": length, "planner": name, "config": cfg,
                     "time_s": round(elapsed, 3)}
@@ -175,7 +193,7 @@ def _references(items: list[tuple[Any, dict]], settings: BuildSettings, *, progr
     from suite.run.executors import Job, LocalExecutor
     from suite.run.runner import worker_init
 
-    todo = [(pid, p) for pid, (p, m) in items if not m["trivial"]]
+    todo = [(pid, p) for pid, (p, m) in items if not m["trivial"] or not m.get("straight_certified", True)]
     budget = settings.reference_time_s + 5.0 * settings.rrt_runs + 10.0
     jobs = [Job(pid, reference_job, (p, settings.reference_time_s, settings.rrt_runs), 3 * budget + 60,
                 group=p.scene.key()) for pid, p in todo]
@@ -260,7 +278,7 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
     t_refs = time.perf_counter() - t0 - t_collect
     solved, unsolved = [], []
     for pid, (p, m) in keyed:
-        if m["trivial"]:
+        if m["trivial"] and m.get("straight_certified", True):
             # no path is shorter; stored with the exact stored configurations at its ends
             ref = {"path": [list(map(float, p.q_start)), list(map(float, p.q_goal))], "planner": "straight",
                    "config": {}, "time_s": 0.0}
@@ -290,6 +308,7 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
                    "cycle_steps_stored": sum(not r["benchmark"] for r in records),
                    "candidates": len(items), "unsolved_dropped": len(unsolved),
                    "trivial_dropped": len(solved) - len(chosen)},
+        "references_certified": True,  # every reference passed the exact check (`dataset verify` enforces it)
         "tiers": {"quick": quick},
         "splits": {"tune": f"every {settings.tune_every}th scene of each family (the first, then every {settings.tune_every}th)",
                    "test": "the other scenes"},

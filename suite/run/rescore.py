@@ -1,7 +1,8 @@
 """Recompute the metrics of a finished run from its stored paths with the current scoring code.
 
 Every record with a stored path gets its problem rebuilt (`recorded_problems`), its path timed
-again with TOPP-RA and scored again exactly as `suite.run.trial.run_trial` scores a new trial.
+again with TOPP-RA, scored and given its exact verdict (`certification`) again exactly as
+`suite.run.trial.run_trial` does for a new trial.
 Records whose world cannot be rebuilt keep their stored metrics and are counted. Nothing else in
 a record changes (not its status). `trials.jsonl` is replaced atomically.
 """
@@ -63,12 +64,13 @@ def rescore_records(records: Sequence[dict[str, Any]], manifest: dict[str, Any])
         manifest: the run's manifest (how its scenes or dataset problems were made).
 
     Returns:
-        The records (same order; only "metrics" differs) and the counts.
+        The records (same order; only "metrics" and "certification" differ) and the counts.
     """
     from planners.worlds import collision_world
     from suite.run.records import joint_path
     from suite.scoring.metrics import record_metrics, score
     from suite.scoring.timing import time_parameterize
+    from suite.scoring.validate import certify_path, structure_reason
 
     problems = RecordedProblems(records, manifest)
     out, kept = [], Counter()
@@ -91,7 +93,8 @@ def rescore_records(records: Sequence[dict[str, Any]], manifest: dict[str, Any])
         scored = score(path=path, world=world, X_WG_goal=problem.X_WG_goal, timed=timed,
                        reference_length_rad=problems.reference(rec, "reference_length_rad"),
                        reference_ee_length_m=problems.reference(rec, "reference_ee_length_m"))
-        out.append({**rec, "metrics": record_metrics(scored)})
+        certification = certify_path(path, world) if structure_reason(problem, path, world) is None else None
+        out.append({**rec, "metrics": record_metrics(scored), "certification": certification})
         rescored += 1
     return out, RescoreCounts(len(records), with_path, rescored, dict(kept), timing_changed)
 
