@@ -167,3 +167,14 @@ def test_verdicts_agree_with_a_ten_times_finer_fixed_step(quick_references):
             assert c.detail["penetration_m"] == 0.0 or not world.is_free(np.array(c.detail["q"]))
         verdicts.append(c.verdict)
     assert verdicts.count(COLLISION) >= 5 and verdicts.count(CERTIFIED) >= 30
+
+
+def test_every_reference_of_the_default_tier_is_certified():
+    from planners.worlds import collision_world
+    from suite.problems import DEFAULT_TIER
+    from suite.problems.dataset import load_dataset
+
+    ds = load_dataset(DEFAULT_TIER)
+    bad = [pid for pid, p in zip(ds.ids, ds.problems)
+           if certifier(collision_world(p)).certify(ds.references[pid]).verdict != CERTIFIED]
+    assert not bad, f"{len(bad)} of {len(ds.ids)} references of {DEFAULT_TIER} are not certified: {bad[:3]}"

@@ -140,6 +140,9 @@ def test_import_of_the_suites_own_rrt_paths_reproduces_the_run_exactly(tmp_path,
         assert new["planning_time_s"] == old["planning_time_s"]
         assert new["external"] is True and new["hardware"] == "this machine"
         assert new["stats"]["reported_status"] == "success"
+        # the same exact verdict as the suite's own trial (times aside)
+        same = ("verdict", "segments", "states", "distance_queries")
+        assert {k: new["certification"][k] for k in same} == {k: old["certification"][k] for k in same}
         assert set(new["metrics"]) == set(old["metrics"])
         for name, value in old["metrics"].items():
             if name not in NOT_OF_THE_PATH:
@@ -161,6 +164,8 @@ def test_straight_lines_are_invalid_on_exactly_the_problems_whose_segment_collid
     invalid = {r["problem_id"] for r in records if r["status"] == "invalid_solution"}
     assert invalid == set(quick.ids) - trivial
     assert {r["problem_id"] for r in records if r["status"] == "success"} == trivial
+    # rejected claims get the exact verdict too: a straight line through an obstacle is a collision
+    assert all(r["certification"]["verdict"] == "collision" for r in records if r["status"] == "invalid_solution")
     assert all(r["stats"]["invalid_reason"].startswith("collision at dense sample") for r in records
                if r["status"] == "invalid_solution")
     # --explain: where and how deeply the rejected ones collide

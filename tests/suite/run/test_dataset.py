@@ -146,3 +146,39 @@ def test_dataset_with_a_generated_scene_flag_is_one_error_line(flag, tmp_path):
     r = compare("--dataset", "recycle-v1", *flag, "--out", str(tmp_path / "x"))
     assert r.returncode == 2 and r.stderr.count("\n") == 1
     assert f"{flag[0]} selects generated scenes" in r.stderr and not (tmp_path / "x").exists()
+
+
+def test_built_references_are_certified_and_verify_requires_it(small):
+    d, manifest = small
+    assert manifest["references_certified"] is True
+    counts = verify_dataset(str(d))
+    assert counts["references_must_be_certified"] is True
+    assert counts["references"] == {"certified": counts["problems"], "unproved": 0, "collision": 0}
+
+
+def test_recertify_replaces_an_uncertified_reference_and_keeps_the_problems(small, tmp_path):
+    from suite.run.recertify_dataset import recertify_dataset
+
+    d, _ = small
+    src = tmp_path / "src"
+    src.mkdir()
+    for f in d.iterdir():
+        (src / f.name).write_text(f.read_text())
+    lines = (src / "problems.jsonl").read_text().splitlines()
+    k, rec = next((i, json.loads(line)) for i, line in enumerate(lines) if not json.loads(line)["trivial"])
+    rec["reference"]["path"] = [rec["q_start"], rec["q_goal"]]  # collides: not certified
+    lines[k] = json.dumps(rec, sort_keys=True)
+    (src / "problems.jsonl").write_text("\n".join(lines) + "\n")
+    out = tmp_path / "revised"
+    manifest = recertify_dataset(str(src), str(out), reference_time_s=1.0, rrt_runs=1, jobs=1, argv=["test"],
+                                 progress_bar=False)
+    r = manifest["recertified"]
+    assert r["source_verdicts"]["collision"] == 1 and r["replaced"] == 1 and r["dropped"] == []
+    assert manifest["references_certified"] is True and manifest["revision_of"]["name"] == json.loads(
+        (src / "manifest.json").read_text())["name"]
+    counts = verify_dataset(str(out))  # every reference certified, hashes consistent
+    assert counts["references"]["certified"] == counts["problems"]
+    new = {json.loads(x)["problem_id"]: json.loads(x) for x in (out / "problems.jsonl").read_text().splitlines()}
+    assert set(new) == {json.loads(x)["problem_id"] for x in lines}  # the same problems
+    assert new[rec["problem_id"]]["reference"]["replaces"]["verdict"] == "collision"
+    assert (src / "problems.jsonl").read_text().splitlines()[k] == lines[k]  # the source is untouched
