@@ -193,10 +193,9 @@ class Certifier:
             self._pp_R.append(np.asarray(outer, float))
             self._pp_j.append(int(first))
         width = max(len(c) for c in self._pp_c)
-        self._pp_cpad = np.zeros((n_pp, width), int)  # padded with centre 0 and radius -inf
-        self._pp_Rpad = np.full((n_pp, width), -np.inf)
-        for k, (c, r) in enumerate(zip(self._pp_c, self._pp_R)):
-            self._pp_cpad[k, : len(c)], self._pp_Rpad[k, : len(c)] = c, r
+        # padded by repeating a pair's first sphere (a repeat leaves the maximum unchanged)
+        self._pp_cpad = np.array([np.resize(c, width) for c in self._pp_c], int)
+        self._pp_Rpad = np.array([np.resize(r, width) for r in self._pp_R], float)
         self._pp_j = np.array(self._pp_j, int)
         self._dreq = fcl.DistanceRequest()
         self._creq = fcl.CollisionRequest()

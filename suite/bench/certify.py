@@ -123,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
           f"ratio = certify seconds / fixed-step seconds")
     print(f"{'paths':14s} {'n':>4s} {'cert.':>5s} {'unpr.':>5s} {'coll.':>5s} {'ratio med':>9s} {'ratio p90':>9s} "
           f"{'states/fixed':>12s} {'queries med':>11s} {'certify ms':>10s} {'fixed ms':>8s}")
-    for group, rows in out.items():
+    every = [x for rows in out.values() for x in rows]
+    for group, rows in [*out.items(), *([("all paths", every)] if len(out) > 1 else [])]:
         if not rows:
             continue
         r = np.array([x["ratio"] for x in rows])

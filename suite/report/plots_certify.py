@@ -24,7 +24,7 @@ def plot_between_samples(*, s_rad: np.ndarray, distance_m: np.ndarray, sample_s_
     """
     fig, ax = plt.subplots(figsize=(7.5, 3.8))
     ax.axhline(0.0, color="black", lw=0.8)
-    ax.plot(s_rad, 1e3 * distance_m, color="#1f77b4", lw=1.6, label=f"distance {pair[0]} - {pair[1]}")
+    ax.plot(s_rad, 1e3 * distance_m, color="#1f77b4", lw=1.6, label=f"distance {pair[0]} - {pair[1]} (proved bound; below 0: depth)")
     neg = distance_m < 0
     ax.fill_between(s_rad, 1e3 * distance_m, 0.0, where=neg, color="#d62728", alpha=0.35, label="in collision")
     ax.plot(sample_s_rad, 1e3 * sample_distance_m, "o", color="#ff7f0e", ms=7, zorder=3,
@@ -32,7 +32,7 @@ def plot_between_samples(*, s_rad: np.ndarray, distance_m: np.ndarray, sample_s_
     ax.set_xlabel("joint motion along the segment (max over joints, rad)")
     ax.set_ylabel("distance (mm)")
     ax.set_title(title, fontsize=10)
-    ax.legend(fontsize=8, loc="upper right")
+    ax.legend(fontsize=8, loc="upper center")
     ax.grid(alpha=0.3)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -110,7 +110,7 @@ def test_lambda_bounds_the_motion_of_every_collision_body():
             moved_by[(moving, base)] = np.sqrt(np.max(np.sum(p * p, axis=2), axis=(1, 2)))  # (n,)
         moved = moved_by[(moving, base)]
         lam = cert._pair_lambdas(np.arange(len(a)), np.full(len(a), k), dq, P)
-        assert np.all(moved <= lam + 1e-9), (cert._names[k], float(np.max(moved - lam)))
+        assert np.all(np.isfinite(lam)) and np.all(moved <= lam + 1e-9), (cert._names[k], float(np.max(moved - lam)))
         seen.add(part.name)
     assert {"held_can", "left_finger", "body", "iiwa_link_7"} <= seen
 
@@ -132,6 +132,19 @@ def test_a_motion_in_free_space_is_certified_with_fewer_states_than_the_fixed_st
     c = certifier(world).certify(path)
     assert c.verdict == CERTIFIED
     assert c.states < len(world.interpolate(path, 0.01))
+
+
+def test_a_repeated_waypoint_is_a_zero_length_segment_proved_free():
+    world = _holding_world()
+    cert = certifier(world)
+    c = cert.certify(np.array([Q_READY, Q_READY, Q_RAISED, Q_RAISED]))
+    assert c.verdict == CERTIFIED and c.segments == 3
+    # a zero-length segment moves nothing: every pair's lambda is exactly 0 (not NaN)
+    _, _, D = cert._evaluate(Q_READY[None])
+    P = cert._reach(np.zeros((1, 7)), D, D)
+    n_pp = len(world._pp_part)
+    lam = cert._pair_lambdas(np.zeros(n_pp, int), np.arange(n_pp), np.zeros((1, 7)), P)
+    assert np.array_equal(lam, np.zeros(n_pp))
 
 
 def test_a_spent_state_budget_is_unproved_never_certified():
