@@ -30,6 +30,10 @@ ROBOT_DIR = "robot"
 COMBINED_URDF, CAPSULE_URDF = "iiwa14_wsg50.urdf", "iiwa14_wsg50_capsules.urdf"
 #: Tolerance of the validator's joint-limit check (`suite.scoring.validate`).
 JOINT_LIMIT_TOLERANCE_RAD = 1e-9
+#: How the validator samples each straight segment a -> b of a path (`suite.scoring.validate`).
+SAMPLING_RULE = ("steps = max(1, ceil(max_j |b_j - a_j| / resolution_rad)); states a + (k / steps) (b - a) for "
+                 "k = 0..steps, both ends included, each checked robot-obstacle and robot-robot (not "
+                 "obstacle-obstacle); touching (distance <= 0) is a collision")
 #: The gripper's finger joints (prismatic, along the gripper frame's x axis).
 FINGER_JOINTS = ("left_finger_sliding_joint", "right_finger_sliding_joint")
 
@@ -111,7 +115,12 @@ def _capsule_parts(el: ET.Element) -> list[ET.Element]:
 
 
 def _pose(X) -> list:
-    return np.asarray(X, float).tolist()
+    """A pose as written: its rotation made orthonormal to rounding (the polar factor, which moves an
+    already orthonormal rotation by at most a few 1e-16), full precision."""
+    X = np.array(X, float)
+    U, _, Vt = np.linalg.svd(X[:3, :3])
+    X[:3, :3] = U @ Vt
+    return X.tolist()
 
 
 def _robot_section(problem: PlanningProblem, robot) -> dict[str, Any]:
@@ -135,7 +144,9 @@ def _obstacles(problem: PlanningProblem) -> list[dict[str, Any]]:
     """The static primitives as `scene --json` prints them, then the cans still on the plate."""
     spec = problem.scene.spec
     gone = set(problem.removed_can_ids) | ({problem.held.can.id} if problem.held is not None else set())
-    out = [o.to_json() for o in spec.obstacles()]
+    # full precision: the validator's own sizes and poses (`scene --json` rounds them for reading)
+    out = [{"name": o.name, "shape": o.shape, "size_m": [float(v) for v in o.size_m], "X_WO": _pose(o.pose())}
+           for o in spec.obstacles()]
     out += [{"name": f"can_{c.id}", "shape": "cylinder", "size_m": [spec.can.radius_m, spec.can.height_m],
              "X_WO": _pose(c.X_WC())} for c in problem.scene.cans if c.id not in gone]
     return out
@@ -150,8 +161,34 @@ def _self_collision_ignored(robot, held: bool) -> list[list[str]]:
             if frozenset((a, b)) in robot.filtered_pairs or (a in GRIPPER_ASSEMBLY and b in GRIPPER_ASSEMBLY)]
 
 
-def problem_entry(problem: PlanningProblem, meta: dict[str, Any], *, dataset: str, robot) -> dict[str, Any]:
-    """One line of problems.jsonl (see `suite.exchange.schema.PROBLEM_SCHEMA`)."""
+def witness_entry(problem: PlanningProblem, path: np.ndarray | None) -> dict[str, Any] | None:
+    """The dataset's reference path as a witness that the problem is solvable: its length, its
+    minimum clearance to the scene (the metric `clearance_min_m`, 0.01 rad samples) and its exact
+    verdict (`suite.scoring.validate.certify_path`)."""
+    if path is None:
+        return None
+    from planners.worlds import collision_world
+    from suite.scoring.definitions import COARSE_STEP_RAD, FINE_PER_COARSE
+    from suite.scoring.metrics import clearance_stats_m
+    from suite.scoring.polyline import arc_samples
+    from suite.scoring.validate import certify_path
+
+    world = collision_world(problem)
+    path = np.asarray(path, float)
+    c_min, _ = clearance_stats_m(world, arc_samples(path, COARSE_STEP_RAD),
+                                 arc_samples(path, COARSE_STEP_RAD, per_step=FINE_PER_COARSE))
+    return {"length_rad": float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))),
+            "waypoints": len(path), "clearance_min_m": c_min,
+            "certification": certify_path(path, world)["verdict"]}
+
+
+def problem_entry(problem: PlanningProblem, meta: dict[str, Any], *, dataset: str, robot,
+                  witness: np.ndarray | None = None) -> dict[str, Any]:
+    """One line of problems.jsonl (see `suite.exchange.schema.PROBLEM_SCHEMA`).
+
+    `X_WG_goal` is the gripper pose at `q_goal` by the robot's forward kinematics (what a path that
+    ends at `q_goal` reaches); the pose the goal was solved for by IK is `X_WG_target`.
+    """
     from suite.scoring.validate import ENDPOINT_TOLERANCE_RAD, VALIDATION_RESOLUTION_RAD
 
     spec = problem.scene.spec
@@ -174,10 +211,15 @@ def problem_entry(problem: PlanningProblem, meta: dict[str, Any], *, dataset: st
         "scene_key": problem.scene.key(),
         "q_start": np.asarray(problem.q_start, float).tolist(),
         "q_goal": np.asarray(problem.q_goal, float).tolist(),
-        "X_WG_goal": _pose(problem.X_WG_goal),
+        "X_WG_goal": _pose(robot.gripper_pose(np.asarray(problem.q_goal, float))),
+        "X_WG_target": _pose(problem.X_WG_goal),
+        "trivial": meta.get("trivial"),
+        "split": meta.get("split"),
+        "witness": witness_entry(problem, witness),
         "time_limit_s": problem.time_limit_s,
         "validation": {"resolution_rad": VALIDATION_RESOLUTION_RAD, "endpoint_tolerance_rad": ENDPOINT_TOLERANCE_RAD,
-                       "joint_limit_tolerance_rad": JOINT_LIMIT_TOLERANCE_RAD},
+                       "joint_limit_tolerance_rad": JOINT_LIMIT_TOLERANCE_RAD,
+                       "rule": SAMPLING_RULE, "obstacle_pairs_checked": False},
         "robot": _robot_section(problem, robot),
         "gripper_opening_m": problem.gripper_opening_m,
         "held_can": held,
@@ -221,7 +263,9 @@ def write_export(dataset_arg: str, out: str | Path, *, time_limit_s: float) -> d
     (out / ROBOT_DIR / CAPSULE_URDF).write_text(combined_urdf(capsules=True))
     (out / SCHEMA_FILE).write_text(json.dumps(schema_document(), indent=1) + "\n")
     with open(out / PROBLEMS_FILE, "w") as f:
-        f.writelines(json.dumps(problem_entry(problem, ds.meta[pid], dataset=label, robot=robot)) + "\n" for pid, problem in zip(ds.ids, ds.problems))
+        f.writelines(json.dumps(problem_entry(problem, ds.meta[pid], dataset=label, robot=robot,
+                                              witness=ds.references.get(pid))) + "\n"
+                     for pid, problem in zip(ds.ids, ds.problems))
     manifest = {"format_version": FORMAT_VERSION, "dataset": {"name": name, "tier": tier, "hash": ds.hash},
                 "problems": len(ds.ids), "time_limit_s": time_limit_s,
                 "files": [PROBLEMS_FILE, SCHEMA_FILE, README_FILE,
@@ -242,7 +286,11 @@ validator, TOPP-RA timing and metrics, beside the suite's planners.
 ## What is here
 
 - `problems.jsonl`: one problem per line (JSON). Each is self-contained: `q_start` and `q_goal`
-  (rad, `iiwa_joint_1..7`), the goal gripper pose `X_WG_goal`, the budget `time_limit_s`
+  (rad, `iiwa_joint_1..7`), the goal gripper pose `X_WG_goal` (forward kinematics at `q_goal`, to
+  rounding; `X_WG_target` is the pose the goal was solved for, 1-2 mm and about 0.6 degrees away),
+  the problem's `family`, `kind`, `split` and `trivial` flag (its straight segment already passes),
+  a `witness` (the dataset's reference path: its length, its minimum clearance and its exact
+  verdict; the path itself is not exported), the budget `time_limit_s`
   ({time_limit_s} s), the validator's settings (`validation`), the robot (URDF, joint limits,
   base pose, the finger joints' positions for this motion), the can held in the gripper (a
   padded cylinder fixed to the gripper link `body`, or null), every obstacle as a primitive in
@@ -263,10 +311,21 @@ validator, TOPP-RA timing and metrics, beside the suite's planners.
 
 A path is a list of waypoints joined by straight joint-space segments. It must start at
 `q_start` and end at `q_goal` (within `validation.endpoint_tolerance_rad`), stay within the
-joint limits, and be collision-free at every state of its segments sampled so that no joint
-moves more than `validation.resolution_rad` (0.01 rad) between checked states: robot against
-obstacles and robot against itself, held can included, except the listed pairs. Touching
-counts as collision (distance <= 0).
+joint limits (within `validation.joint_limit_tolerance_rad`), and be collision-free at every
+checked state. Each segment a -> b is checked at
+
+    steps = max(1, ceil(max_j |b_j - a_j| / 0.01)),  states a + (k / steps) (b - a),  k = 0 .. steps
+
+(`validation.rule`; both ends included; the max is over the 7 joints, not a Euclidean norm).
+Checked: robot against obstacles and robot against itself, held can included, except the pairs
+in `allowed_contacts` (the base link against the static world; the held can against the plate it
+was lifted from) and `self_collision_ignored`. Obstacle-obstacle pairs are not checked (cans may
+touch the plate they stand on). Touching counts as collision (distance <= 0).
+
+This is the field's fixed-step rule and the suite's success. Beside it the suite gives every
+claimed path an exact verdict, `certified`, `unproved` or `collision`, on the same geometry and
+pairs: a path free at every sample may still pass through an obstacle between two of them
+(docs/certification.md in the suite).
 
 ## What to send back
 

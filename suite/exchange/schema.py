@@ -45,7 +45,7 @@ PROBLEM_SCHEMA: dict[str, Any] = {
     "type": "object",
     "description": "One planning problem: move the arm from q_start to q_goal without collision.",
     "required": ["format_version", "problem_id", "dataset", "family", "kind", "q_start", "q_goal", "X_WG_goal",
-                 "time_limit_s", "validation", "robot", "gripper_opening_m", "held_can", "obstacles",
+                 "X_WG_target", "trivial", "split", "witness", "time_limit_s", "validation", "robot", "gripper_opening_m", "held_can", "obstacles",
                  "allowed_contacts", "self_collision_ignored"],
     "additionalProperties": False,
     "properties": {
@@ -59,7 +59,32 @@ PROBLEM_SCHEMA: dict[str, Any] = {
         "scene_key": {**_STR, "description": "the scene the problem comes from (problems share scenes)"},
         "q_start": {**_Q, "description": "start configuration, rad (iiwa_joint_1..7)"},
         "q_goal": {**_Q, "description": "goal configuration, rad: the path must end here"},
-        "X_WG_goal": {**_POSE, "description": "the gripper frame G ('body' link) at q_goal, in the world, m"},
+        "X_WG_goal": {**_POSE, "description": "the gripper frame G ('body' link) at q_goal by forward kinematics "
+                                              "of the exported URDF, in the world, m (rotation orthonormal to "
+                                              "rounding)"},
+        "X_WG_target": {**_POSE, "description": "the gripper pose the goal configuration was solved for by IK "
+                                                "(within the IK's tolerances of X_WG_goal), m"},
+        "trivial": {"type": ["boolean", "null"],
+                    "description": "true if the straight segment q_start -> q_goal already passes the validator"},
+        "split": {"type": ["string", "null"], "description": "the dataset split the problem belongs to (tune or test)"},
+        "witness": {
+            "description": "the dataset's reference path, which proves the problem solvable (not exported "
+                           "itself), or null",
+            "oneOf": [{"type": "null"}, {
+                "type": "object",
+                "required": ["length_rad", "waypoints", "clearance_min_m", "certification"],
+                "additionalProperties": False,
+                "properties": {
+                    "length_rad": {**_NUM, "description": "its joint-space length (sum of L2 segment lengths), rad"},
+                    "waypoints": {"type": "integer"},
+                    "clearance_min_m": {**_NUM, "description": "its smallest distance to the scene (robot and "
+                                                               "held can, base and link 1 left out), m"},
+                    "certification": {"enum": ["certified", "unproved", "collision"],
+                                      "description": "its exact verdict: certified means no collision between "
+                                                     "the validator's samples either"},
+                },
+            }],
+        },
         "time_limit_s": {**_NUM, "exclusiveMinimum": 0, "description": "planning budget per problem, s"},
         "validation": {
             "type": "object",
@@ -67,6 +92,9 @@ PROBLEM_SCHEMA: dict[str, Any] = {
             "description": "how the suite checks a path: straight joint-space segments between waypoints, "
                            "sampled so that no joint moves more than resolution_rad between checked states",
             "properties": {
+                "rule": {**_STR, "description": "the sampling rule as a formula"},
+                "obstacle_pairs_checked": {"const": False,
+                                           "description": "obstacle-obstacle pairs are never checked"},
                 "resolution_rad": {**_NUM, "description": "max |dq_i| between densely checked states, rad"},
                 "endpoint_tolerance_rad": {**_NUM, "description": "max |q_i| error of the first and last "
                                                                   "waypoint from q_start / q_goal, rad"},

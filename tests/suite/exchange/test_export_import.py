@@ -267,3 +267,31 @@ def test_cli_export_and_import_into_an_existing_run(tmp_path, capsys, quick):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "line 2" in err
     assert len(read_trials(run)) == 2 * len(quick.ids)
+
+
+def test_the_export_is_exact(tmp_path):
+    """On the default tier: the goal pose is the forward kinematics at q_goal, every rotation is
+    orthonormal, the sampling rule is written, and each problem carries its family, kind, split,
+    trivial flag and a certified witness with its clearance."""
+    from scenes.robot_model import load_robot
+    from suite.problems import DEFAULT_TIER
+
+    ds = load_dataset(DEFAULT_TIER)
+    write_export(DEFAULT_TIER, tmp_path / "x", time_limit_s=5.0)
+    robot = load_robot()
+    readme = (tmp_path / "x" / "README.md").read_text()
+    assert "steps = max(1, ceil(max_j |b_j - a_j| / 0.01))" in readme and "Obstacle-obstacle pairs are not checked" in readme
+    for p in problems_of(tmp_path / "x"):
+        fk = robot.gripper_pose(np.array(p["q_goal"]))
+        assert np.max(np.abs(np.array(p["X_WG_goal"]) - fk)) < 1e-9
+        poses = [p["X_WG_goal"], p["X_WG_target"], *(o["X_WO"] for o in p["obstacles"])]
+        poses += [p["held_can"]["X_GC"]] if p["held_can"] else []
+        for X in poses:
+            R = np.array(X)[:3, :3]
+            assert np.max(np.abs(R.T @ R - np.eye(3))) < 1e-12
+        meta = ds.meta[p["problem_id"]]
+        assert (p["family"], p["kind"], p["split"], p["trivial"]) == (meta["family"], meta["kind"], meta["split"],
+                                                                     meta["trivial"])
+        assert p["witness"]["certification"] == "certified" and p["witness"]["clearance_min_m"] > 0
+        assert p["witness"]["length_rad"] == pytest.approx(meta["reference_length_rad"], abs=1e-9)
+        assert "both ends included" in p["validation"]["rule"] and p["validation"]["obstacle_pairs_checked"] is False
