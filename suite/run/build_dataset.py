@@ -64,6 +64,13 @@ class BuildSettings:
         bin_warm_start: pose each cycle's bin goal from the previous cycle's first
             (`suite.problems.cycle.build_problems`); a manifest without this setting was built
             without it (`pose_settings`).
+        split_rule: "stratified" (`dataset_splits.stratified_tune_scenes`: every family's tune
+            share in [0.20, 0.35] of its non-trivial problems, every (family, kind) cell of 5 or
+            more represented) or "every" (every `tune_every`-th scene of a family, as
+            `recycle-v1` and `recycle-v2` were split; a manifest without this setting was).
+        tier_rule: "balanced" (`dataset_splits.balanced_tier`: no family above 25% of the tier's
+            non-trivial problems, every family with 20 or more non-trivial test problems at 8% or
+            more) or "round-robin" (whole test scenes of every family in turn, as before).
     """
 
     name: str
@@ -78,6 +85,8 @@ class BuildSettings:
     quick_problems: int = 120
     jobs: int = 2
     bin_warm_start: bool = True
+    split_rule: str = "stratified"
+    tier_rule: str = "balanced"
 
 
 def pose_settings(manifest: dict[str, Any]) -> dict[str, Any]:
@@ -121,7 +130,7 @@ def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple
                 log.info("%s seed %d skipped: %s", family, seed, exc)
                 seed += 1
                 continue
-            split = "tune" if made % settings.tune_every == 0 else "test"
+            split = "tune" if made % settings.tune_every == 0 else "test"  # `stratify` may redo it
             scene_recs.append(scene_record(scene, split=split))
             for p in problems:
                 if p.pre_status is not None:
@@ -141,6 +150,33 @@ def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple
             if progress is not None:
                 progress(family, made)
     return scene_recs, out
+
+
+def scene_counts(records: list[dict]) -> list:
+    """`dataset_splits.SceneCounts` of every scene of some problem records (benchmark ones)."""
+    from collections import Counter
+
+    from suite.run.dataset_splits import SceneCounts
+
+    by: dict[str, list[dict]] = {}
+    for r in records:
+        if r.get("benchmark", True):
+            by.setdefault(r["scene_key"], []).append(r)
+    return [SceneCounts(k, v[0]["family"], len(v), dict(Counter(r["kind"] for r in v if not r["trivial"])))
+            for k, v in by.items()]
+
+
+def stratify(scene_recs: list[dict], items: list) -> None:
+    """Re-assign the split of every scene and problem by `stratified_tune_scenes` (in place)."""
+    from suite.run.dataset_splits import stratified_tune_scenes
+
+    recs = [{"scene_key": p.scene.key(), "family": p.scene.variant, "kind": p.kind, "trivial": m["trivial"]}
+            for _, p, m in items]
+    tune = stratified_tune_scenes(scene_counts(recs))
+    for s in scene_recs:
+        s["split"] = "tune" if s["scene_key"] in tune else "test"
+    for _, p, m in items:
+        m["split"] = "tune" if p.scene.key() in tune else "test"
 
 
 def straight_certified(problem) -> bool:
@@ -270,6 +306,8 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
             print(f"\r{family}: {made}/{settings.scenes} scenes", end="", file=sys.stderr, flush=True)
 
     scene_recs, items = collect(settings, progress=say)
+    if settings.split_rule == "stratified":
+        stratify(scene_recs, items)
     if progress_bar:
         print(file=sys.stderr)
     t_collect = time.perf_counter() - t0
@@ -298,7 +336,25 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
     records = [r for r in records if r["scene_key"] in used_scenes]
     scene_recs = [s for s in scene_recs if s["scene_key"] in used_scenes]
     scene_lines = [json.dumps(s, sort_keys=True) for s in scene_recs]
-    quick = _quick_tier(records, scene_recs, settings)
+    if settings.tier_rule == "balanced":
+        from suite.run.dataset_splits import balanced_tier
+
+        test = [s for s in scene_counts(records) if s.key in {r["scene_key"] for r in scene_recs if r["split"] == "test"}]
+        keys = balanced_tier(test, target=settings.quick_problems)
+        quick = [r["problem_id"] for k in keys for r in records if r["scene_key"] == k and r["benchmark"]]
+    else:
+        quick = _quick_tier(records, scene_recs, settings)
+    from suite.run.dataset_splits import split_violations, tier_violations
+
+    counts_all = scene_counts(records)
+    tune_keys = {r["scene_key"] for r in scene_recs if r["split"] == "tune"}
+    in_quick = {r["scene_key"] for r in records if r["problem_id"] in set(quick)}
+    rules = {"split": split_violations(counts_all, tune_keys),
+             "quick": tier_violations([s for s in counts_all if s.key in in_quick],
+                                      [s for s in counts_all if s.key not in tune_keys])}
+    for what, broken in rules.items():
+        for line in broken:
+            log.warning("%s rule broken: %s", what, line)
     manifest = {
         "name": settings.name,
         "format_version": FORMAT_VERSION,
@@ -308,10 +364,14 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
                    "cycle_steps_stored": sum(not r["benchmark"] for r in records),
                    "candidates": len(items), "unsolved_dropped": len(unsolved),
                    "trivial_dropped": len(solved) - len(chosen)},
-        "references_certified": True,  # every reference passed the exact check (`dataset verify` enforces it)
+        "references_certified": True,
+        "rules_broken": rules,  # the split and tier rules (suite.run.dataset_splits) this build could not meet  # every reference passed the exact check (`dataset verify` enforces it)
         "tiers": {"quick": quick},
-        "splits": {"tune": f"every {settings.tune_every}th scene of each family (the first, then every {settings.tune_every}th)",
-                   "test": "the other scenes"},
+        "splits": ({"tune": f"every {settings.tune_every}th scene of each family (the first, then every {settings.tune_every}th)",
+                    "test": "the other scenes"} if settings.split_rule == "every" else
+                   {"tune": "whole scenes, per family 20-35% of its non-trivial problems and one of every (family, "
+                            "kind) cell of 5 or more (suite.run.dataset_splits.stratified_tune_scenes)",
+                    "test": "the other scenes"}),
         "build": {"command": " ".join(["python -m suite", *argv]), "settings": dataclasses.asdict(settings),
                   "versions": versions(), "git_commit": git_commit(),
                   "built_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
