@@ -6,6 +6,8 @@ diagrams, python-fcl objects) once per distinct world and reuses them.
 
 from __future__ import annotations
 
+import contextlib
+
 from scenes.fcl_world import CollisionWorld
 
 _FCL: dict[tuple, CollisionWorld] = {}
@@ -21,9 +23,25 @@ def remember(cache: dict, key, value, *, max_items: int = MAX_CACHED):
     return value
 
 
+#: The padding of the worlds `collision_world` gives in this process (`padded_worlds`).
+_PADDING_M = 0.0
+
+
+@contextlib.contextmanager
+def padded_worlds(padding_m: float):
+    """Within this block `collision_world` gives worlds whose obstacles are grown by padding_m
+    (a dataset build searches its witnesses so, to keep them off the obstacles); never in a trial."""
+    global _PADDING_M
+    before, _PADDING_M = _PADDING_M, float(padding_m)
+    try:
+        yield
+    finally:
+        _PADDING_M = before
+
+
 def collision_world(problem) -> CollisionWorld:
     """The python-fcl world of a problem (robot with held can, remaining cans, opening)."""
-    key = problem.world_key()
+    key = (problem.world_key(), _PADDING_M)
     world = _FCL.get(key)
     if world is None:
         world = remember(_FCL, key, CollisionWorld(
@@ -31,6 +49,7 @@ def collision_world(problem) -> CollisionWorld:
             gripper_opening_m=problem.gripper_opening_m,
             held=problem.held,
             removed_can_ids=problem.removed_can_ids,
+            padding_m=_PADDING_M,
         ))
     return world
 

@@ -48,7 +48,7 @@ from typing import Any
 import fcl
 import numpy as np
 
-from scenes.fcl_shapes import fcl_geometry
+from scenes.fcl_shapes import fcl_geometry, grown_dims
 from scenes.fcl_tables import APART
 
 #: Bisection stops on a segment shorter than this (max-norm, rad): the pair is `unproved` there.
@@ -65,20 +65,6 @@ MAX_STATES = 200_000
 
 CERTIFIED, COLLISION, UNPROVED = "certified", "collision", "unproved"
 VERDICTS = (CERTIFIED, COLLISION, UNPROVED)
-
-
-def grown_dims(kind: str, dims, delta_m: float) -> tuple:
-    """The dimensions of a primitive grown so that it contains every point within delta_m of it
-    (a negative delta_m erodes it: the points at least |delta_m| inside)."""
-    if kind == "box":
-        return tuple(float(x) + 2 * delta_m for x in dims)
-    if kind == "cylinder":
-        return (dims[0] + delta_m, dims[1] + 2 * delta_m)
-    if kind == "capsule":
-        return (dims[0] + delta_m, dims[1])
-    if kind == "sphere":
-        return (dims[0] + delta_m,)
-    raise ValueError(f"unsupported shape {kind!r}")
 
 
 def point_axis_radii(robot, p_L: np.ndarray, link: int) -> np.ndarray:

@@ -73,6 +73,20 @@ def cover_spheres(kind: str, dims, spacing: float) -> tuple[np.ndarray, np.ndarr
     raise ValueError(f"unsupported shape {kind!r}")
 
 
+def grown_dims(kind: str, dims, delta_m: float) -> tuple:
+    """The dimensions of a primitive grown so that it contains every point within delta_m of it
+    (a negative delta_m erodes it: the points at least |delta_m| inside)."""
+    if kind == "box":
+        return tuple(float(x) + 2 * delta_m for x in dims)
+    if kind == "cylinder":
+        return (dims[0] + delta_m, dims[1] + 2 * delta_m)
+    if kind == "capsule":
+        return (dims[0] + delta_m, dims[1])
+    if kind == "sphere":
+        return (dims[0] + delta_m,)
+    raise ValueError(f"unsupported shape {kind!r}")
+
+
 def bounding_radius(kind: str, dims) -> float:
     """Radius of the smallest sphere about the shape's origin that encloses it."""
     if kind == "box":

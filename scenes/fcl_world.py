@@ -44,7 +44,7 @@ import math
 import fcl
 import numpy as np
 
-from scenes.fcl_shapes import G_INDEX, Part, aabb_half_extents, cover_spheres, fcl_geometry
+from scenes.fcl_shapes import G_INDEX, Part, aabb_half_extents, cover_spheres, fcl_geometry, grown_dims
 from scenes.fcl_tables import APART, TABLE_MARGIN_M, TOUCHING, UNKNOWN, on_axis, pair_table
 from scenes.robot_model import RobotModel, load_robot
 from scenes.scene import HeldCan, Scene
@@ -70,6 +70,10 @@ class CollisionWorld:
         gripper_opening_m: finger opening (the spec's open width by default).
         held: a can carried in the gripper; it is part of the robot and not on the plate.
         removed_can_ids: cans no longer on the plate (already recycled).
+        padding_m: every scene obstacle grown by this much (m; 0: the validator's world). A path
+            free in a padded world keeps at least that clearance from the scene (at its checked
+            states); the robot's own pairs are not padded (its capsules come within millimetres
+            of each other in ordinary postures).
     """
 
     def __init__(
@@ -80,8 +84,10 @@ class CollisionWorld:
         gripper_opening_m: float | None = None,
         held: HeldCan | None = None,
         removed_can_ids=(),
+        padding_m: float = 0.0,
     ) -> None:
         self.scene = scene
+        self.padding_m = float(padding_m)
         self.robot = robot = robot or load_robot()
         spec = scene.spec
         opening = spec.grasp.open_width_m if gripper_opening_m is None else gripper_opening_m
@@ -112,6 +118,8 @@ class CollisionWorld:
         r_can, h_can = spec.can.radius_m, spec.can.height_m
         prims = [(o.name, o.shape, o.size_m, o.pose(), o.axis_aligned_box) for o in spec.obstacles()]
         prims += [(f"can_{c.id}", "cylinder", (r_can, h_can), c.X_WC(), False) for c in scene.cans if c.id not in removed]
+        if self.padding_m:
+            prims = [(name, shape, grown_dims(shape, size, self.padding_m), X, exact) for name, shape, size, X, exact in prims]
         for name, shape, size, X, exact in prims:
             self.obstacles.append((name, fcl.CollisionObject(fcl_geometry(shape, size), fcl.Transform(X[:3, :3], X[:3, 3]))))
             obs_c.append(X[:3, 3].copy())

@@ -162,21 +162,18 @@ def _self_collision_ignored(robot, held: bool) -> list[list[str]]:
 
 
 def witness_entry(problem: PlanningProblem, path: np.ndarray | None) -> dict[str, Any] | None:
-    """The dataset's reference path as a witness that the problem is solvable: its length, its
-    minimum clearance to the scene (the metric `clearance_min_m`, 0.01 rad samples) and its exact
-    verdict (`suite.scoring.validate.certify_path`)."""
+    """The dataset's witness that the problem is solvable (its `witness` path, searched with a
+    margin, or else its reference): its length, its minimum clearance to the scene (the metric
+    `clearance_min_m`, 0.01 rad samples) and its exact verdict (`suite.scoring.validate.certify_path`)."""
     if path is None:
         return None
     from planners.worlds import collision_world
-    from suite.scoring.definitions import COARSE_STEP_RAD, FINE_PER_COARSE
-    from suite.scoring.metrics import clearance_stats_m
-    from suite.scoring.polyline import arc_samples
+    from suite.scoring.metrics import min_clearance_m
     from suite.scoring.validate import certify_path
 
     world = collision_world(problem)
     path = np.asarray(path, float)
-    c_min, _ = clearance_stats_m(world, arc_samples(path, COARSE_STEP_RAD),
-                                 arc_samples(path, COARSE_STEP_RAD, per_step=FINE_PER_COARSE))
+    c_min = min_clearance_m(world, path)
     return {"length_rad": float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))),
             "waypoints": len(path), "clearance_min_m": c_min,
             "certification": certify_path(path, world)["verdict"]}
@@ -264,7 +261,7 @@ def write_export(dataset_arg: str, out: str | Path, *, time_limit_s: float) -> d
     (out / SCHEMA_FILE).write_text(json.dumps(schema_document(), indent=1) + "\n")
     with open(out / PROBLEMS_FILE, "w") as f:
         f.writelines(json.dumps(problem_entry(problem, ds.meta[pid], dataset=label, robot=robot,
-                                              witness=ds.references.get(pid))) + "\n"
+                                              witness=ds.witnesses.get(pid, ds.references.get(pid)))) + "\n"
                      for pid, problem in zip(ds.ids, ds.problems))
     manifest = {"format_version": FORMAT_VERSION, "dataset": {"name": name, "tier": tier, "hash": ds.hash},
                 "problems": len(ds.ids), "time_limit_s": time_limit_s,

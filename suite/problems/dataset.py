@@ -183,6 +183,8 @@ class Dataset:
             (scene_key, can_id, kind) -> (q_start, q_goal): their straight segment is valid.
         picking_orders: per scene_key, the cans of its cycle in picking order (every stored step
             counts, benchmark or not): a can whose every step is trivial is still picked.
+        witnesses: per problem_id, the witness path searched with a margin from the obstacles,
+            where the dataset stores one apart from its reference (datasets from recycle-v3 on).
     """
 
     name: str
@@ -195,6 +197,7 @@ class Dataset:
     references: dict[str, np.ndarray]
     cycle_steps: dict[tuple[str, int, str], tuple[list, list]] = dataclasses.field(default_factory=dict)
     picking_orders: dict[str, tuple[int, ...]] = dataclasses.field(default_factory=dict)
+    witnesses: dict[str, np.ndarray] = dataclasses.field(default_factory=dict)
 
 
 META_FIELDS = ("family", "kind", "trivial", "difficulty", "straight_length_rad", "split", "reference_length_rad")
@@ -271,7 +274,7 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
     split = tier if tier not in tiers and tier in splits else None  # a split is a tier too
     scenes = {rec["scene_key"]: rec for _, _, rec in _read_jsonl(directory / SCENES_FILE)}
     built: dict[str, Scene] = {}
-    ids, problems, meta, refs, steps = [], [], {}, {}, {}
+    ids, problems, meta, refs, steps, wits = [], [], {}, {}, {}, {}
     seen: dict[str, set[str]] = {field: set() for field in filters}  # every value of a filtered field
     removed_before: dict[str, dict[int, int]] = {}  # scene -> can -> how many cans were picked before it
     for lineno, _, rec in _read_jsonl(directory / PROBLEMS_FILE):
@@ -304,6 +307,8 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
         problems.append(problem)
         meta[pid] = {"problem_id": pid, **{k: rec.get(k) for k in META_FIELDS}}
         refs[pid] = ref
+        if rec.get("witness"):
+            wits[pid] = np.asarray(rec["witness"]["path"], float)
     for field, allowed in filters.items():
         unknown = sorted(allowed - seen[field])
         if unknown:
@@ -311,7 +316,7 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
     if filters and not ids:
         raise SuiteError(f"{text!r} selects no problem of dataset {name!r} (tier or split {tier!r})")
     orders = {key: tuple(sorted(cans, key=lambda c: (cans[c], c))) for key, cans in removed_before.items()}
-    return Dataset(name, manifest["hash"], tier, manifest, tuple(ids), tuple(problems), meta, refs, steps, orders)
+    return Dataset(name, manifest["hash"], tier, manifest, tuple(ids), tuple(problems), meta, refs, steps, orders, wits)
 
 
 def dataset_scene(name: str, scene_key: str) -> Scene:
@@ -353,6 +358,13 @@ def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
         reason = validate_path(problem, path, world)
         if reason is not None:
             raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): reference rejected: {reason}")
+        if rec.get("witness"):
+            wpath = np.asarray(rec["witness"]["path"], float)
+            reason = validate_path(problem, wpath, world)
+            if reason is None and certify_path(wpath, world)["verdict"] != "certified":
+                reason = "not certified"
+            if reason is not None:
+                raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): witness rejected: {reason}")
         if rec.get("benchmark", True):
             cert = certify_path(path, world)
             verdicts[cert["verdict"]] += 1

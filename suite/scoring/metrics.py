@@ -102,6 +102,14 @@ def clearance_stats_m(world, coarse: ArcSamples, fine: ArcSamples) -> tuple[floa
     return c_min, coarse.mean(c)
 
 
+def min_clearance_m(world, path) -> float:
+    """The metric `clearance_min_m` of a joint path alone (m): its smallest signed distance to the
+    scene at samples at most 0.01 rad apart by arc length (`clearance_stats_m`)."""
+    path = as_path(path)
+    return clearance_stats_m(world, arc_samples(path, COARSE_STEP_RAD),
+                             arc_samples(path, COARSE_STEP_RAD, per_step=FINE_PER_COARSE))[0]
+
+
 def goal_error(X_WG: np.ndarray, X_WG_goal: np.ndarray) -> tuple[float, float]:
     """Position error ||p_WG - p_WG_goal|| (metres) and rotation angle of R_WG^T R_WG_goal
     (degrees) of a gripper pose against its target."""

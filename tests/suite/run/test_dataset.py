@@ -182,3 +182,22 @@ def test_recertify_replaces_an_uncertified_reference_and_keeps_the_problems(smal
     assert set(new) == {json.loads(x)["problem_id"] for x in lines}  # the same problems
     assert new[rec["problem_id"]]["reference"]["replaces"]["verdict"] == "collision"
     assert (src / "problems.jsonl").read_text().splitlines()[k] == lines[k]  # the source is untouched
+
+
+def test_every_problem_stores_a_certified_witness_with_its_clearance(small):
+    from planners.worlds import collision_world
+    from suite.scoring.metrics import min_clearance_m
+
+    d, manifest = small
+    ds = load_dataset(str(d))
+    assert set(ds.witnesses) == set(ds.ids)
+    records = {json.loads(x)["problem_id"]: json.loads(x) for x in (d / "problems.jsonl").read_text().splitlines()}
+    for pid, p in zip(ds.ids, ds.problems):
+        w = records[pid]["witness"]
+        world = collision_world(p)
+        assert w["clearance_min_m"] == pytest.approx(min_clearance_m(world, ds.witnesses[pid]), abs=1e-12)
+        assert 0.0 <= w["padding_m"] <= 0.003
+        if w["padding_m"]:  # a margin path is kept only where it keeps farther off than the reference
+            assert w["clearance_min_m"] > min_clearance_m(world, ds.references[pid])
+    c = manifest["witness_clearance_m"]
+    assert c["n"] == sum(not m["trivial"] for m in ds.meta.values()) and c["min"] <= c["median"]
