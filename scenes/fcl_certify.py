@@ -188,21 +188,28 @@ class Certifier:
 
     # --- bounds -----------------------------------------------------------------------------------
 
-    def _evaluate(self, Q: np.ndarray):
+    def _evaluate(self, Q: np.ndarray, cols: np.ndarray | None = None):
         """For a batch (M, 7): the world rows (M, rows, 3), the sphere-pair distance lower bounds
-        (M, S), and each centre's distance from each joint axis (M, C, 7), 0 where the joint does
-        not move it."""
+        (M, S) (only the columns `cols`, if given: NaN elsewhere), and each centre's distance from
+        each joint axis (M, C, 7), 0 where the joint does not move it."""
         w = self.world
         rows = w._batch_rows(Q)
         m, n = rows.shape[:2]
         flat = rows.reshape(m * n, 3)
         off = (n * np.arange(m))[:, None]
-        G = np.abs(flat.take((self._sp_ia[None, :] + off).ravel(), axis=0)
-                   - flat.take((self._sp_ib[None, :] + off).ravel(), axis=0))  # row gathers: fast
-        G -= np.tile(self._sp_H, (m, 1))
+        ia, ib, H, R = ((self._sp_ia, self._sp_ib, self._sp_H, self._sp_R) if cols is None else
+                        (self._sp_ia[cols], self._sp_ib[cols], self._sp_H[cols], self._sp_R[cols]))
+        G = np.abs(flat.take((ia[None, :] + off).ravel(), axis=0)
+                   - flat.take((ib[None, :] + off).ravel(), axis=0))  # row gathers: fast
+        G -= np.tile(H, (m, 1))
         np.maximum(G, 0.0, out=G)
         G *= G
-        eta = np.sqrt(G.sum(axis=1)).reshape(m, -1) - self._sp_R
+        sub = np.sqrt(G.sum(axis=1)).reshape(m, -1) - R
+        if cols is None:
+            eta = sub
+        else:
+            eta = np.full((m, len(self._sp_R)), np.nan)
+            eta[:, cols] = sub
         X = self.robot.link_poses(Q)[:, 1:8]  # link j's frame: its z axis is joint j's axis
         c = flat.take((self._centres[None, :] + off).ravel(), axis=0).reshape(m, -1, 1, 3)
         p = c - X[:, None, :, :3, 3]  # (M, C, 7, 3)
@@ -331,11 +338,16 @@ class Certifier:
             qa, qb = allQ[seg_a], allQ[seg_b]
             dq = np.abs(qb - qa)
             P = self._reach(dq, allD[seg_a], allD[seg_b])
-            # tier 1: sphere pairs, reduced to body pairs (the least margin over a pair's spheres)
-            margin = allE[seg_a] + allE[seg_b] - P[:, self._sp_c, self._sp_j]
+            # tier 1: the sphere pairs of the body pairs still to prove, reduced to body pairs (the
+            # least margin over a pair's spheres); NaN columns belong to pairs proved before
+            cols = np.flatnonzero(pending.any(axis=0)[self._sp_pp])
             body_min = np.full((len(seg_a), self._n_pp), -np.inf)
-            if margin.shape[1]:
-                body_min[:, self._has_spheres] = np.minimum.reduceat(margin, self._sp_starts, axis=1)
+            if len(cols):
+                margin = (allE[seg_a][:, cols] + allE[seg_b][:, cols]
+                          - P[:, self._sp_c[cols], self._sp_j[cols]])
+                pp_sub = self._sp_pp[cols]
+                starts = np.flatnonzero(np.r_[True, pp_sub[1:] != pp_sub[:-1]])
+                body_min[:, pp_sub[starts]] = np.minimum.reduceat(margin, starts, axis=1)
             failing = pending & ~(body_min > 0)
             self._tables_apart(qa, qb, failing)  # tier 2
             ent_s, ent_k = np.nonzero(failing)
@@ -383,7 +395,8 @@ class Certifier:
             f = np.concatenate([np.arange(1, k) / k for k in m])
             new_q = qa[owner] + f[:, None] * (qb[owner] - qa[owner])
             g_new = len(allQ) + np.arange(len(owner))
-            for block, new in zip((Q, ROWS, ETA, DIST), (new_q, *self._evaluate(new_q))):
+            need = np.flatnonzero(failing[idx].any(axis=0)[self._sp_pp])  # what the new states are used for
+            for block, new in zip((Q, ROWS, ETA, DIST), (new_q, *self._evaluate(new_q, need))):
                 block.append(new)
             n_states += len(owner)
             first = np.concatenate([[0], np.cumsum(m - 1)[:-1]])  # each owner's first new state
