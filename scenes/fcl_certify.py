@@ -60,6 +60,8 @@ PROOF_FRACTIONS = (0.95, 0.7, 0.3)
 EXACT_SLACK_M = 1e-9
 #: A segment is cut into at most this many pieces at once (as many as its ends' bounds ask for).
 MAX_PIECES = 16
+#: Segments certified together (bounds the memory of a path with many waypoints).
+CHUNK_SEGMENTS = 256
 #: At most this many configurations are evaluated for one path; beyond, the verdict is `unproved`.
 MAX_STATES = 200_000
 
@@ -310,11 +312,29 @@ class Certifier:
     # --- the check --------------------------------------------------------------------------------
 
     def certify(self, path: np.ndarray, *, max_states: int = MAX_STATES) -> Certificate:
-        """The exact verdict of the piecewise-straight joint path (N, 7)."""
+        """The exact verdict of the piecewise-straight joint path (N, 7), CHUNK_SEGMENTS segments
+        at a time (memory stays bounded however many waypoints the path has)."""
         t_start = time.perf_counter()
         path = np.atleast_2d(np.asarray(path, float))
         if len(path) == 1:
             path = np.vstack([path, path])
+        n_seg = len(path) - 1
+        states = queries = 0
+        min_seg = math.inf
+        for lo in range(0, n_seg, CHUNK_SEGMENTS):
+            verdict, detail, n, k, shortest = self._certify_part(path[lo : lo + CHUNK_SEGMENTS + 1],
+                                                                  max_states=max_states - states)
+            states, queries, min_seg = states + n, queries + k, min(min_seg, shortest)
+            if verdict != CERTIFIED:
+                detail["segment"] += lo
+                return Certificate(verdict, n_seg, states, queries, time.perf_counter() - t_start, detail,
+                                   None if not math.isfinite(min_seg) else min_seg)
+        return Certificate(CERTIFIED, n_seg, states, queries, time.perf_counter() - t_start, None,
+                           None if not math.isfinite(min_seg) else min_seg)
+
+    def _certify_part(self, path: np.ndarray, *, max_states: int) -> tuple:
+        """(verdict, detail, states, exact queries, shortest segment) of a path of at least two
+        waypoints; segments numbered from 0 within it."""
         n_seg = len(path) - 1
         rows, eta, D = self._evaluate(path)
         Q, ROWS, ETA, DIST = [path], [rows], [eta], [D]  # blocks of states, appended per level
@@ -322,8 +342,7 @@ class Certifier:
         queries, n_states, min_seg = 0, len(path), math.inf
 
         def done(verdict, detail=None):
-            return Certificate(verdict, n_seg, n_states, queries, time.perf_counter() - t_start, detail,
-                               None if not math.isfinite(min_seg) else min_seg)
+            return verdict, detail, n_states, queries, min_seg
 
         # the segments of this level: end states (global indices), path segment, span on it, pairs to prove
         seg_a = np.arange(n_seg)
