@@ -184,8 +184,14 @@ def judge_results(lines: list[ResultLine], ds, *, planner: str) -> list[dict[str
     from planners.worlds import collision_world
     from suite.run.trial import judge_result, make_trial, trial_record
 
+    import sys
+
+    from tqdm import tqdm
+
     by_id = {ln.problem_id: ln for ln in lines}
     records = []
+    # progress on a terminal, as compare shows it (a long import judges dense paths for minutes)
+    bar = tqdm(total=len(by_id), desc="judging", unit="path", file=sys.stderr, disable=not sys.stderr.isatty())
     for pid, problem in zip(ds.ids, ds.problems):
         spec = make_trial(problem, planner=planner, planner_config={}, run_seed=0, meta=ds.meta[pid])
         record = trial_record(spec)
@@ -202,7 +208,9 @@ def judge_results(lines: list[ResultLine], ds, *, planner: str) -> list[dict[str
                 record["hardware"] = line.hardware
             if line.notes is not None:
                 record["notes"] = line.notes
+            bar.update(1)
         records.append(record)
+    bar.close()
     return records
 
 

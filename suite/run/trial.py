@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus
-from suite.scoring.validate import certify_path, structure_reason, validate_path
+from suite.scoring.validate import certify_path, over_limit, structure_reason, validate_path
 
 log = logging.getLogger(__name__)
 
@@ -228,7 +228,14 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
     path = None if result.path is None else np.asarray(result.path, float).round(10)
     metrics: dict[str, float] = {}
     certification = None
-    if status == PlanStatus.SUCCESS:
+    limit = over_limit(path) if status == PlanStatus.SUCCESS and structure_reason(problem, path, world) is None else None
+    if limit is not None:
+        status = PlanStatus.INVALID_SOLUTION
+        stats["reason"] = "path_over_limit"
+        stats["limit"] = limit
+        stats["invalid_reason"] = (f"path over the judge's limit: {limit['value']} {limit['limit'].replace('_', ' ')} "
+                                   f"> {limit['max']} (suite.scoring.validate)")
+    elif status == PlanStatus.SUCCESS:
         if structure_reason(problem, path, world) is None:  # the exact verdict, beside the 0.01 rad rule
             certification = certify_path(path, world)
         reason = validate_path(problem, path, world)

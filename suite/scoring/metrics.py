@@ -155,30 +155,30 @@ def score(
         timed = time_parameterize(path, robot=robot, options=timing_options)
     coarse = arc_samples(path, COARSE_STEP_RAD)
     fine = arc_samples(path, COARSE_STEP_RAD, per_step=FINE_PER_COARSE)
-    X_WG = robot.gripper_pose(fine.q)
+    f = _fine_stats(fine.q, robot, posture.carried_upright_can(world))
     c_min, c_mean = clearance_stats_m(world, coarse, fine)
-    err_m, err_deg = goal_error(X_WG[-1], X_WG_goal)
+    err_m, err_deg = goal_error(f["X_WG_last"], X_WG_goal)
     length = path_length_rad(path)
-    ee_length = ee_path_length_m(X_WG)
+    ee_length = f["ee_length_m"]
     nan = math.nan
     return {
         "path_length_rad": length,
         "ee_path_length_m": ee_length,
-        "ee_rotation_deg": ee_rotation_deg(X_WG),
+        "ee_rotation_deg": f["ee_rotation_deg"],
         "length_ratio": _ratio(length, reference_length_rad, MIN_STRAIGHT_RAD),
         "length_over_straight": _ratio(length, float(np.linalg.norm(path[-1] - path[0])), MIN_STRAIGHT_RAD),
         "ee_length_ratio": _ratio(ee_length, reference_ee_length_m, MIN_STRAIGHT_M),
-        "ee_length_over_straight": _ratio(ee_length, float(np.linalg.norm(X_WG[-1, :3, 3] - X_WG[0, :3, 3])),
-                                          MIN_STRAIGHT_M),
+        "ee_length_over_straight": _ratio(ee_length, float(np.linalg.norm(f["X_WG_last"][:3, 3]
+                                                                          - f["X_WG_first"][:3, 3])), MIN_STRAIGHT_M),
         "turning_angle_rad": turning_angle_rad(path),
         "sparc": joint_speed_sparc(timed),
         "smoothness": ompl_smoothness(resample_uniform(path, OMPL_SMOOTHNESS_STEP_RAD)),
         "jerk_max": jerk_max(timed) if timed.ok else nan,
         "jerk_sq_integral": jerk_sq_integral(timed) if timed.ok else nan,
-        "joint_margin_min_frac": float(np.min(posture.joint_limit_margins(fine.q, robot))),
+        "joint_margin_min_frac": f["joint_margin_min_frac"],
         "posture_distance_mean_rad": fine.mean(posture.posture_distances_rad(fine.q)),
-        "manipulability_min_m3": float(np.min(posture.manipulability(fine.q, robot))),
-        "can_tilt_max_deg": posture.tilt_max_deg(fine.q, robot, posture.carried_upright_can(world)),
+        "manipulability_min_m3": f["manipulability_min_m3"],
+        "can_tilt_max_deg": f["can_tilt_max_deg"],
         "clearance_min_m": c_min,
         "clearance_mean_m": c_mean,
         "duration_s": float(timed.duration_s) if timed.ok else nan,
@@ -189,6 +189,36 @@ def score(
         "acceleration_limit_ratio": float(timed.acceleration_ratio),
         "path_deviation_rad": float(timed.path_deviation_rad),
     }
+
+
+#: Fine samples whose forward kinematics are computed at once (each costs a few kB of temporaries:
+#: a dense claimed path's samples would otherwise hold gigabytes).
+FK_CHUNK = 2048
+
+
+def _fine_stats(q: np.ndarray, robot, X_GC: np.ndarray | None) -> dict[str, Any]:
+    """The metrics of the fine samples that need forward kinematics, FK_CHUNK samples at a time
+    (consecutive chunks share a sample, so the summed lengths and rotations are those of the whole)."""
+    ee_length = rotation = 0.0
+    margin = manip = math.inf
+    tilt = -math.inf
+    first = last = None
+    n = len(q)
+    for lo in range(0, n, FK_CHUNK):
+        block = q[max(lo - 1, 0) : lo + FK_CHUNK]
+        X_WG = robot.gripper_pose(block)
+        ee_length += ee_path_length_m(X_WG)
+        rotation += ee_rotation_deg(X_WG)
+        own = block if lo == 0 else block[1:]
+        margin = min(margin, float(np.min(posture.joint_limit_margins(own, robot))))
+        manip = min(manip, float(np.min(posture.manipulability(own, robot))))
+        if X_GC is not None:
+            tilt = max(tilt, posture.tilt_max_deg(own, robot, X_GC))
+        first = X_WG[0] if first is None else first
+        last = X_WG[-1]
+    return {"ee_length_m": ee_length, "ee_rotation_deg": rotation, "joint_margin_min_frac": margin,
+            "manipulability_min_m3": manip, "can_tilt_max_deg": tilt if X_GC is not None else math.nan,
+            "X_WG_first": first, "X_WG_last": last}
 
 
 def record_metrics(scored: dict[str, Any]) -> dict[str, float | None]:

@@ -11,6 +11,31 @@ VALIDATION_RESOLUTION_RAD = 0.01
 ENDPOINT_TOLERANCE_RAD = 1e-6
 
 
+#: The largest claimed path the judge takes on (its reason: time and memory grow with both; a
+#: path over either is `invalid_solution`, `stats.reason` = "path_over_limit", and is not checked,
+#: timed or scored). Corners: waypoints left after dropping duplicate and collinear ones
+#: (`polyline.simplify`), what TOPP-RA works on (about 0.25 MB each); checked states: the
+#: validator's 0.01 rad states. Real paths are far below (references: at most a few hundred
+#: corners and a few thousand states); 2,000 corners keep a judged trial under 1 GB.
+MAX_PATH_CORNERS = 2_000
+MAX_CHECKED_STATES = 200_000
+
+
+def over_limit(path: np.ndarray) -> dict | None:
+    """None if the judge takes the claimed path on, else which limit it passes: {limit, value, max}."""
+    from suite.scoring.polyline import simplify
+
+    path = np.asarray(path, float)
+    states = 1 + int(np.sum(np.maximum(1, np.ceil(np.max(np.abs(np.diff(path, axis=0)), axis=1)
+                                                      / VALIDATION_RESOLUTION_RAD)))) if len(path) > 1 else 1
+    if states > MAX_CHECKED_STATES:
+        return {"limit": "checked_states", "value": states, "max": MAX_CHECKED_STATES}
+    corners = len(simplify(path)) if len(path) > 2 else len(path)
+    if corners > MAX_PATH_CORNERS:
+        return {"limit": "corners", "value": corners, "max": MAX_PATH_CORNERS}
+    return None
+
+
 def structure_reason(problem: PlanningProblem, path: np.ndarray | None, world) -> str | None:
     """None if a claimed path is a finite (N, 7) array from q_start to q_goal within the joint
     limits, else the reason: everything the validator asks but collision."""

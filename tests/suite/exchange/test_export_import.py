@@ -295,3 +295,41 @@ def test_the_export_is_exact(tmp_path):
         assert p["witness"]["certification"] == "certified" and p["witness"]["clearance_min_m"] > 0
         assert p["witness"]["length_rad"] == pytest.approx(meta["reference_length_rad"], abs=1e-9)
         assert "both ends included" in p["validation"]["rule"] and p["validation"]["obstacle_pairs_checked"] is False
+
+
+def test_a_claim_over_the_judges_limit_is_invalid_fast_and_the_rest_of_the_file_is_judged(tmp_path):
+    """A 40,002-waypoint back-and-forth claim (0.81 rad a segment, valid in free space) is answered
+    in a separate process well inside 120 s and 1 GB: invalid_solution, naming the limit and the
+    value; the other line of the file is judged as usual."""
+    import subprocess
+    import sys
+    import time
+
+    from suite.scoring.validate import MAX_CHECKED_STATES
+
+    sel = "recycle-v2.1:quick:family=open"
+    ds = load_dataset(sel)
+    (pid0, p0), (pid1, p1) = list(zip(ds.ids, ds.problems))[:2]
+    dense = np.array([p0.q_start, p0.q_goal] * 20001)
+    dense[-1] = p0.q_goal
+    lines = [{"problem_id": pid0, "status": "success", "path": dense.tolist(), "planning_time_s": 1.0},
+             {"problem_id": pid1, "status": "success", "path": [p1.q_start.tolist(), p1.q_goal.tolist()],
+              "planning_time_s": 0.1}]
+    results = write_lines(tmp_path / "dense.jsonl", lines)
+    argv = ["suite", "import", "--dataset", sel, "--results", results, "--planner", "dense", "--out", str(tmp_path / "run")]
+    # the import in a process of its own, which reports its own peak memory (kB) when it is done
+    code = ("import resource, runpy, sys\n"
+            f"sys.argv = {argv!r}\n"
+            "try:\n    runpy.run_module('suite', run_name='__main__')\nexcept SystemExit as e:\n    rc = e.code\n"
+            "print('PEAK_KB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    elapsed = time.perf_counter() - t0
+    assert "PEAK_KB" in proc.stdout, proc.stderr[-500:]
+    peak_mb = int(proc.stdout.split("PEAK_KB")[-1].split()[0]) / 1024
+    assert elapsed < 120 and peak_mb < 1024
+    records = {r["problem_id"]: r for r in read_trials(tmp_path / "run")}
+    r0 = records[pid0]
+    assert r0["status"] == "invalid_solution" and r0["stats"]["reason"] == "path_over_limit"
+    assert r0["stats"]["limit"] == {"limit": "checked_states", "value": 1 + 40001 * 81, "max": MAX_CHECKED_STATES}
+    assert records[pid1]["status"] in ("success", "invalid_solution") and "limit" not in records[pid1]["stats"]
