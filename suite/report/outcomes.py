@@ -58,6 +58,16 @@ def family_of(rec: dict[str, Any]) -> str:
     return str(rec.get("family") or rec["variant"])
 
 
+#: Metrics that time the planner: their medians are over warm trials only (`is_cold`).
+TIMES = ("planning_time_s", "time_to_trajectory_s")
+
+
+def is_cold(rec: dict[str, Any]) -> bool:
+    """True for a worker's first trial of its planner (imports, caches, first solve in its time);
+    records without the flag (imports, runs before it existed) count as warm."""
+    return rec.get("warm") is False
+
+
 def _time_at_budget(rec: dict[str, Any]) -> float:
     t = metric(rec, "planning_time_s")
     if is_success(rec):
@@ -83,9 +93,10 @@ def outcomes(records: Iterable[dict[str, Any]], *, metrics: Sequence[str]) -> di
         ok = [r for r in recs if is_success(r)]
         values = {}
         for name in metrics:
-            vals = [v for v in (metric(r, name) for r in ok) if math.isfinite(v)]
+            use = [r for r in ok if not is_cold(r)] if name in TIMES else ok
+            vals = [v for v in (metric(r, name) for r in use) if math.isfinite(v)]
             values[name] = float(np.median(vals)) if vals else math.nan
-        times = [t for t in map(_time_at_budget, recs) if math.isfinite(t)]
+        times = [t for t in map(_time_at_budget, [r for r in recs if not is_cold(r)]) if math.isfinite(t)]
         out[key] = Outcome(
             key=key,
             scene=scene_of(recs[0]),

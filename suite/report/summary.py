@@ -28,7 +28,7 @@ from suite.report.summary_stats import (
     paired_comparisons,
     summarize_run,
 )
-from suite.report.summary_tables import certification_counts, summary_markdown
+from suite.report.summary_tables import certification_counts, cold_start, summary_markdown
 from suite.run.records import STATUSES, planners_in, problem_counts
 
 log = logging.getLogger(__name__)
@@ -60,7 +60,9 @@ def summary_json(
 
     Keys: distinct_problems, scenes, trivial_problems, few_problems (fewer than FEW_PROBLEMS),
     planners: {NAME: {success: {k, n, rate, ci95, trials}, status_counts, certification: {certified,
-    unproved, collision, not checked} (successful trials by exact verdict), metrics: {METRIC: {median,
+    unproved, collision, not checked} (successful trials by exact verdict), cold_start {cold_trials,
+    warm_trials, planning_time_s: {cold, warm}, setup_time_s: {cold, warm}} (time medians are over
+    warm trials), metrics: {METRIC: {median,
     q1, q3, n}}, time_to_solve_s, common_subset: {METRIC: {median, n}}, by_family: {FAMILY: {success,
     metrics}}, by_kind: {KIND: {success, metrics}}}}, metrics (their definitions), paired: [...].
     """
@@ -84,6 +86,7 @@ def summary_json(
             "success": _success_json(g),
             "status_counts": g.status_counts,
             "certification": certification_counts(records, p),
+            "cold_start": json.loads(json.dumps(cold_start(records, p)).replace("NaN", "null")),
             "metrics": {m: _stats_json(g.metrics[m]) for m in SUMMARY_METRICS},
             TIME_TO_SOLVE: _stats_json(g.time_to_solve),
             "common_subset": {m: {"median": _num(common[m][p].median), "n": common[m][p].n} for m in SUMMARY_METRICS},

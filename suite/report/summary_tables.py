@@ -6,6 +6,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 from tabulate import tabulate
 
 from suite.report.outcomes import FEW_PROBLEMS
@@ -130,6 +131,43 @@ def _certification_rows(records: Sequence[dict[str, Any]], planners: Sequence[st
     return headers, rows
 
 
+def cold_start(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any]:
+    """A planner's cold trials (a worker's first of it) against its warm ones: how many, and the
+    median planning and setup time (s) of each."""
+    from suite.report.outcomes import is_cold
+
+    mine = [r for r in records if r.get("planner") == planner and "warm" in r]
+    cold = [r for r in mine if is_cold(r)]
+    warm = [r for r in mine if not is_cold(r)]
+
+    def med(rs, field):
+        v = [float(r[field]) for r in rs if isinstance(r.get(field), (int, float))]
+        return float(np.median(v)) if v else math.nan
+
+    return {"cold_trials": len(cold), "warm_trials": len(warm),
+            "planning_time_s": {"cold": med(cold, "planning_time_s"), "warm": med(warm, "planning_time_s")},
+            "setup_time_s": {"cold": med(cold, "setup_time_s"), "warm": med(warm, "setup_time_s")}}
+
+
+def _cold_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+    headers = ["planner", "cold trials", "planning time, cold (s)", "planning time, warm (s)", "setup, cold (s)",
+               "setup, warm (s)"]
+    rows = []
+    for p in planners:
+        c = cold_start(records, p)
+        rows.append([p, c["cold_trials"], format_number(c["planning_time_s"]["cold"]),
+                     format_number(c["planning_time_s"]["warm"]), format_number(c["setup_time_s"]["cold"]),
+                     format_number(c["setup_time_s"]["warm"])])
+    return headers, rows
+
+
+COLD_INTRO = (
+    "A worker's first trial of a planner is cold: its planning time includes what only the first pays (lazy "
+    "imports, caches, a solver's first set-up). Every time median in these tables is over warm trials only; "
+    "a problem whose only trial was cold has no time. Records written before the flag existed count as warm. "
+    "Medians over all trials of a kind, not per problem:")
+
+
 CERTIFICATION_INTRO = (
     "Success is the field's rule: the path is free at every state sampled with at most 0.01 rad of joint "
     "motion between states (OMPL's and MoveIt's benchmarks use such a rule). Beside it, each successful path "
@@ -178,7 +216,8 @@ def summary_markdown(
         f"{len(records)} trials: {len(planners)} planners ({', '.join(planners)}). {composition(records)}",
         "",
         "The unit is the distinct problem: a problem tried several times counts once (success as the share "
-        "of its trials solved, each metric as the median of its successful trials). Success: solved/distinct "
+        "of its trials solved, each metric as the median of its successful trials; times over warm trials only, "
+        "see Cold starts). Success: solved/distinct "
         "problems, rate and its 95% Wilson interval. Time to solve: median [quartiles] over every problem, a "
         "failure counted at its time budget. Other metrics: median [first quartile, third quartile] over each "
         "planner's own solved problems; the common-subset table below measures all planners on the same problems.",
@@ -194,6 +233,9 @@ def summary_markdown(
         md.append(tabulate(*reversed(_common_rows(summary.common, planners)), tablefmt="github"))
     md += ["", "## Certified paths (successful trials)", "", CERTIFICATION_INTRO, ""]
     md.append(tabulate(*reversed(_certification_rows(records, planners)), tablefmt="github"))
+    if any("warm" in r for r in records):
+        md += ["", "## Cold starts", "", COLD_INTRO, ""]
+        md.append(tabulate(*reversed(_cold_rows(records, planners)), tablefmt="github"))
     md += ["", "## Failures by status (trials)", ""]
     md.append(tabulate(*reversed(_failure_rows(summary.overall, statuses_in(records))), tablefmt="github"))
     md += ["", "## Per planner and problem kind", ""]

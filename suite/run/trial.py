@@ -23,6 +23,9 @@ log = logging.getLogger(__name__)
 
 #: The memory cap of this worker process (MiB), once `limit_memory` has set it.
 _MEMORY_LIMIT_MB: int | None = None
+#: Planners that have already planned in this process: a trial of one of them is warm (its
+#: imports, caches and first solve are paid); the first is cold (`record["warm"]`).
+_PLANNED: set[str] = set()
 
 
 def limit_memory(limit_mb: int) -> None:
@@ -187,6 +190,8 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
         except Exception as exc:
             result = _error_result(spec, exc)
     planning_time_s = time.perf_counter() - t0
+    record["warm"] = spec.planner in _PLANNED  # False: this worker's first trial of the planner
+    _PLANNED.add(spec.planner)
     return judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s)
 
 

@@ -205,3 +205,21 @@ def test_every_executed_can_has_exactly_one_fate():
     counts = fate_counts([{"cans": cans}])
     assert counts == {BIN: 1, BACK_ON_PLATE: 1, ELSEWHERE: 2, NOT_ATTEMPTED: 1}
     assert sum(counts.values()) == len(cans)
+
+
+def test_time_medians_leave_out_cold_trials():
+    """A worker's first trial of a planner (warm: False) is out of every time median, in the
+    per-problem collapse and in time to solve; its success and other metrics count."""
+    from suite.report.outcomes import outcomes
+
+    base = {"planner": "rrt", "status": "success", "problem": "transit", "scene_seed": 1, "variant": "wall",
+            "can_id": 0, "time_limit_s": 5.0, "metrics": {"path_length_rad": 1.0}}
+    recs = [{**base, "problem_id": "a", "planning_time_s": 9.0, "warm": False},
+            {**base, "problem_id": "a", "planning_time_s": 1.0, "warm": True},
+            {**base, "problem_id": "b", "planning_time_s": 7.0, "warm": False},
+            {**base, "problem_id": "c", "planning_time_s": 2.0}]  # a record from before the flag: warm
+    by_id = {o.key: o for o in outcomes(recs, metrics=("planning_time_s", "path_length_rad")).values()}
+    times = sorted(t for o in by_id.values() if (t := o.metrics["planning_time_s"]) == t)  # NaN != NaN
+    assert times == [1.0, 2.0]  # problem b's only trial was cold: no time
+    assert all(o.successes >= 1 and o.metrics["path_length_rad"] == 1.0 for o in by_id.values())
+    assert sorted(o.time_to_solve_s for o in by_id.values() if o.time_to_solve_s == o.time_to_solve_s) == [1.0, 2.0]

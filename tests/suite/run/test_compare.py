@@ -168,6 +168,11 @@ def test_execute_on_a_dataset_runs_its_stored_scenes_cycle_by_cycle(tmp_path):
     recs = records(out)
     assert len(execs) == len({r["scene_key"] for r in recs}) >= 1
     assert all(r["status"] == "success" for r in recs)
+    # one worker: its first rrt trial is cold, every later one warm; the summary says so
+    assert [r["warm"] for r in recs].count(False) == 1 and len(recs) > 1
+    cold = json.loads((out / "summary.json").read_text())["planners"]["rrt"]["cold_start"]
+    assert cold["cold_trials"] == 1 and cold["warm_trials"] == len(recs) - 1
+    assert "## Cold starts" in (out / "summary.md").read_text()
     for e in execs:
         assert e["cans_attempted"] == e["cans_total"] >= 1, e  # no step missing from the dataset
 
