@@ -208,7 +208,7 @@ class _OmplPlanner:
         cfg = self.config
         set_ompl_log_level(cfg.verbose)
         world = collision_world(problem)
-        checks0 = world.checks
+        checks0, query0 = world.checks, world.query_s
         bad = check_endpoints(problem, world)
         if bad is not None:
             return PlanResult(bad.status, None, {**bad.stats, "solver": self.solver,
@@ -230,7 +230,8 @@ class _OmplPlanner:
                     retry = PlanResult(PlanStatus.TIMEOUT, None, {
                         **result.stats, "reason": f"path collides at {fine} rad resolution; no time left to replan"})
                 result = dataclasses.replace(retry, stats={**retry.stats, "replanned_fine": True})
-        stats = {**result.stats, "collision_checks": world.checks - checks0, "seed": seed}
+        stats = {**result.stats, "collision_checks": world.checks - checks0, "seed": seed,
+                 "collision_query_s": world.query_s - query0}
         stats.setdefault("replanned_fine", False)
         path = result.path
         if path is not None and cfg.interpolate_rad is not None:

@@ -28,7 +28,7 @@ from suite.report.summary_stats import (
     paired_comparisons,
     summarize_run,
 )
-from suite.report.summary_tables import certification_counts, cold_start, summary_markdown
+from suite.report.summary_tables import attribution_summary, certification_counts, cold_start, summary_markdown
 from suite.run.records import STATUSES, planners_in, problem_counts
 
 log = logging.getLogger(__name__)
@@ -62,7 +62,8 @@ def summary_json(
     planners: {NAME: {success: {k, n, rate, ci95, trials}, status_counts, certification: {certified,
     unproved, collision, not checked} (successful trials by exact verdict), cold_start {cold_trials,
     warm_trials, planning_time_s: {cold, warm}, setup_time_s: {cold, warm}} (time medians are over
-    warm trials), metrics: {METRIC: {median,
+    warm trials), attribution {engine, trials, queries, s_per_query, query_share} (or null for a
+    planner that does not count its collision queries), metrics: {METRIC: {median,
     q1, q3, n}}, time_to_solve_s, common_subset: {METRIC: {median, n}}, by_family: {FAMILY: {success,
     metrics}}, by_kind: {KIND: {success, metrics}}}}, metrics (their definitions), paired: [...].
     """
@@ -86,6 +87,7 @@ def summary_json(
             "success": _success_json(g),
             "status_counts": g.status_counts,
             "certification": certification_counts(records, p),
+            "attribution": attribution_summary(records, p),
             "cold_start": json.loads(json.dumps(cold_start(records, p)).replace("NaN", "null")),
             "metrics": {m: _stats_json(g.metrics[m]) for m in SUMMARY_METRICS},
             TIME_TO_SOLVE: _stats_json(g.time_to_solve),

@@ -161,6 +161,43 @@ def _cold_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tu
     return headers, rows
 
 
+def attribution_summary(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any] | None:
+    """Medians over a planner's warm trials that carry `attribution`: collision queries, seconds per
+    query, query share of planning time; None if none carries it."""
+    from suite.report.outcomes import is_cold
+
+    att = [r["attribution"] for r in records if r.get("planner") == planner and r.get("attribution")
+           and not is_cold(r)]
+    if not att:
+        return None
+    per = [a["s_per_query"] for a in att if a.get("s_per_query")]
+    return {"engine": att[0].get("engine"), "trials": len(att),
+            "queries": float(np.median([a["queries"] for a in att])),
+            "s_per_query": float(np.median(per)) if per else None,
+            "query_share": float(np.median([a["query_share"] for a in att]))}
+
+
+def _attribution_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+    headers = ["planner", "engine", "trials", "collision queries", "us per query", "share of planning time"]
+    rows = []
+    for p in planners:
+        a = attribution_summary(records, p)
+        if a is None:
+            rows.append([p, "not counted", "-", "-", "-", "-"])
+        else:
+            rows.append([p, a["engine"], a["trials"], format_number(a["queries"]),
+                         format_number(1e6 * a["s_per_query"]) if a["s_per_query"] else "n/a",
+                         f"{100 * a['query_share']:.0f}%"])
+    return headers, rows
+
+
+ATTRIBUTION_INTRO = (
+    "Medians over warm trials of what a planning time went to: the collision queries the planner asked "
+    "(python-fcl state checks, timed around each call from Python) and the rest (the planner's own work and "
+    "the Python around it). `ik`, `trajopt` and `gcs` query Drake's geometry inside C++ solvers and are not "
+    "counted yet.")
+
+
 COLD_INTRO = (
     "A worker's first trial of a planner is cold: its planning time includes what only the first pays (lazy "
     "imports, caches, a solver's first set-up). Every time median in these tables is over warm trials only; "
@@ -233,6 +270,9 @@ def summary_markdown(
         md.append(tabulate(*reversed(_common_rows(summary.common, planners)), tablefmt="github"))
     md += ["", "## Certified paths (successful trials)", "", CERTIFICATION_INTRO, ""]
     md.append(tabulate(*reversed(_certification_rows(records, planners)), tablefmt="github"))
+    if any(r.get("attribution") for r in records):
+        md += ["", "## Where planning time goes", "", ATTRIBUTION_INTRO, ""]
+        md.append(tabulate(*reversed(_attribution_rows(records, planners)), tablefmt="github"))
     if any("warm" in r for r in records):
         md += ["", "## Cold starts", "", COLD_INTRO, ""]
         md.append(tabulate(*reversed(_cold_rows(records, planners)), tablefmt="github"))

@@ -192,7 +192,24 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
     planning_time_s = time.perf_counter() - t0
     record["warm"] = spec.planner in _PLANNED  # False: this worker's first trial of the planner
     _PLANNED.add(spec.planner)
-    return judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s)
+    record = judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s)
+    attribution = attribute(record["stats"], planning_time_s)
+    if attribution is not None:
+        record["attribution"] = attribution
+    return record
+
+
+def attribute(stats: dict[str, Any], planning_time_s: float) -> dict[str, Any] | None:
+    """Where a planning time went, for planners that count and time their collision queries
+    (`stats.collision_checks`, `stats.collision_query_s`: the python-fcl world's state checks and
+    their seconds, the OMPL planners): queries, query_s, s_per_query, other_s (the planner's own
+    work and the Python around it) and query_share. None for a planner that does not count them
+    (ik, trajopt and gcs query Drake's geometry in C++; not instrumented yet)."""
+    n, q_s = stats.get("collision_checks"), stats.get("collision_query_s")
+    if not isinstance(n, int) or not isinstance(q_s, (int, float)) or not planning_time_s > 0:
+        return None
+    return {"engine": "python-fcl", "queries": n, "query_s": q_s, "s_per_query": q_s / n if n else None,
+            "other_s": max(planning_time_s - q_s, 0.0), "query_share": min(q_s / planning_time_s, 1.0)}
 
 
 #: A success returned later than its budget by more than this share of it plus LATE_GRACE_S is a

@@ -173,6 +173,13 @@ def test_execute_on_a_dataset_runs_its_stored_scenes_cycle_by_cycle(tmp_path):
     cold = json.loads((out / "summary.json").read_text())["planners"]["rrt"]["cold_start"]
     assert cold["cold_trials"] == 1 and cold["warm_trials"] == len(recs) - 1
     assert "## Cold starts" in (out / "summary.md").read_text()
+    # rrt counts and times its python-fcl queries: the record splits its planning time
+    for r in recs:
+        a = r["attribution"]
+        assert a["queries"] == r["stats"]["collision_checks"] > 0
+        assert 0 < a["query_s"] <= r["planning_time_s"] and a["query_s"] + a["other_s"] == pytest.approx(r["planning_time_s"])
+    att = json.loads((out / "summary.json").read_text())["planners"]["rrt"]["attribution"]
+    assert att["engine"] == "python-fcl" and 0 < att["query_share"] <= 1
     for e in execs:
         assert e["cans_attempted"] == e["cans_total"] >= 1, e  # no step missing from the dataset
 
