@@ -77,6 +77,11 @@ def make_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None,
         p = plot_joint_profiles(records, planners=planners, kind=kind, path=out_dir / f"joint_profiles_{kind}.png")
         if p is not None:
             written.append(p)
+    from suite.report.plots_attribution import plot_time_attribution
+
+    p = plot_time_attribution(records, planners=planners, path=out_dir / "time_attribution.png")
+    if p is not None:
+        written.append(p)
     if executions:
         written.append(plot_execution(executions, planners=planners, path=out_dir / "execution.png"))
     if budget_records:

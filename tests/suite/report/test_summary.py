@@ -223,3 +223,16 @@ def test_time_medians_leave_out_cold_trials():
     assert times == [1.0, 2.0]  # problem b's only trial was cold: no time
     assert all(o.successes >= 1 and o.metrics["path_length_rad"] == 1.0 for o in by_id.values())
     assert sorted(o.time_to_solve_s for o in by_id.values() if o.time_to_solve_s == o.time_to_solve_s) == [1.0, 2.0]
+
+
+def test_the_time_attribution_plot_is_drawn_only_when_a_record_attributes(tmp_path):
+    from suite.report.plots_attribution import plot_time_attribution
+
+    base = {"status": "success", "problem": "transit", "scene_seed": 1, "variant": "wall", "can_id": 0,
+            "time_limit_s": 5.0, "warm": True, "planning_time_s": 1.0}
+    counted = {**base, "planner": "rrt", "problem_id": "a",
+               "attribution": {"queries": 100, "query_s": 0.8, "other_s": 0.2, "query_share": 0.8, "s_per_query": 0.008}}
+    other = {**base, "planner": "trajopt", "problem_id": "a"}
+    assert plot_time_attribution([other], planners=["trajopt"], path=tmp_path / "none.png") is None
+    p = plot_time_attribution([counted, other], planners=["rrt", "trajopt"], path=tmp_path / "att.png")
+    assert p is not None and p.stat().st_size > 5_000
