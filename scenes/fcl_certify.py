@@ -153,10 +153,6 @@ class Certifier:
         self._sp_H = w._H[keep][order]  # the box's half sizes (0 for a sphere)
         n_pp = len(w._pp_part)
         self._n_pp = n_pp
-        starts = np.searchsorted(self._sp_pp, np.arange(n_pp))
-        ends = np.searchsorted(self._sp_pp, np.arange(n_pp), side="right")
-        self._has_spheres = ends > starts
-        self._sp_starts = starts[self._has_spheres]
 
         # --- tables (self pairs decided by one joint) -----------------------------------------------
         # per table: its joint, range, and the running count of cells not proved apart
@@ -164,7 +160,7 @@ class Certifier:
                         for j, lo, inv, n, cells, k in w._tables]
 
         # --- body pairs, for exact distances: the moving part's spheres bound its points ------------
-        self._pp_c, self._pp_R, self._pp_j, self._names = [], [], [], []
+        pp_c, pp_R, pp_j, self._names = [], [], [], []
         obstacle_name = {id(obj): name for name, obj in w.obstacles}
         for k in range(n_pp):
             i = w._pp_part[k]
@@ -177,14 +173,14 @@ class Certifier:
                 first = w.parts[lo].link
                 self._names.append((w.parts[i].name, w.parts[j].name))
             rows, outer, _inner = w._spheres["env"][moving]
-            self._pp_c.append(np.array([col[int(r)] for r in rows], int))
-            self._pp_R.append(np.asarray(outer, float))
-            self._pp_j.append(int(first))
-        width = max(len(c) for c in self._pp_c)
+            pp_c.append(np.array([col[int(r)] for r in rows], int))
+            pp_R.append(np.asarray(outer, float))
+            pp_j.append(int(first))
+        width = max(len(c) for c in pp_c)
         # padded by repeating a pair's first sphere (a repeat leaves the maximum unchanged)
-        self._pp_cpad = np.array([np.resize(c, width) for c in self._pp_c], int)
-        self._pp_Rpad = np.array([np.resize(r, width) for r in self._pp_R], float)
-        self._pp_j = np.array(self._pp_j, int)
+        self._pp_cpad = np.array([np.resize(c, width) for c in pp_c], int)
+        self._pp_Rpad = np.array([np.resize(r, width) for r in pp_R], float)
+        self._pp_j = np.array(pp_j, int)
         self._dreq = fcl.DistanceRequest()
         self._creq = fcl.CollisionRequest()
 

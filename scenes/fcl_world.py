@@ -488,6 +488,13 @@ class CollisionWorld:
     # --- motions --------------------------------------------------------------------------------
 
     @staticmethod
+    def segment_steps(path: np.ndarray, resolution_rad: float) -> np.ndarray:
+        """Steps (N - 1,) of each straight segment of a path (N, 7) at a joint resolution:
+        max(1, ceil(max_j |dq_j| / resolution_rad)); the segment is checked at each step's end."""
+        d = np.max(np.abs(np.diff(np.atleast_2d(np.asarray(path, float)), axis=0)), axis=1)
+        return np.maximum(1, np.ceil(d / resolution_rad)).astype(int)
+
+    @staticmethod
     def interpolate(path: np.ndarray, resolution_rad: float) -> np.ndarray:
         """Straight joint-space segments between waypoints, sampled so that no joint moves more
         than `resolution_rad` between consecutive samples. Includes every waypoint."""
@@ -495,8 +502,7 @@ class CollisionWorld:
         if len(path) == 1:
             return path.copy()
         out = [path[:1]]
-        for a, b in zip(path[:-1], path[1:]):
-            n = max(1, math.ceil(float(np.max(np.abs(b - a))) / resolution_rad))
+        for a, b, n in zip(path[:-1], path[1:], CollisionWorld.segment_steps(path, resolution_rad).tolist()):
             t = np.arange(1, n + 1)[:, None] / n
             seg = a + t * (b - a)
             seg[-1] = b  # exactly the waypoint (a + 1 * (b - a) may differ from b in the last bit)

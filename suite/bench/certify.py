@@ -43,7 +43,8 @@ def measure_path(path: np.ndarray, world, *, repeats: int) -> dict:
         c = cert.certify(path)
         exact.append(c.time_s)
     fixed_s, exact_s = float(np.median(fixed)), float(np.median(exact))
-    return {"verdict": c.verdict, "detail": c.detail, "fixed_states": len(world.interpolate(path, VALIDATION_RESOLUTION_RAD)),
+    fixed_states = 1 + int(world.segment_steps(path, VALIDATION_RESOLUTION_RAD).sum())
+    return {"verdict": c.verdict, "detail": c.detail, "fixed_states": fixed_states,
             "states": c.states, "distance_queries": c.distance_queries, "fixed_s": fixed_s, "certify_s": exact_s,
             "ratio": exact_s / fixed_s}
 

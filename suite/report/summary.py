@@ -88,7 +88,7 @@ def summary_json(
             "status_counts": g.status_counts,
             "certification": certification_counts(records, p),
             "attribution": attribution_summary(records, p),
-            "cold_start": json.loads(json.dumps(cold_start(records, p)).replace("NaN", "null")),
+            "cold_start": cold_start(records, p),
             "metrics": {m: _stats_json(g.metrics[m]) for m in SUMMARY_METRICS},
             TIME_TO_SOLVE: _stats_json(g.time_to_solve),
             "common_subset": {m: {"median": _num(common[m][p].median), "n": common[m][p].n} for m in SUMMARY_METRICS},

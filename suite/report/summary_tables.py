@@ -133,7 +133,7 @@ def _certification_rows(records: Sequence[dict[str, Any]], planners: Sequence[st
 
 def cold_start(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any]:
     """A planner's cold trials (a worker's first of it) against its warm ones: how many, and the
-    median planning and setup time (s) of each."""
+    median planning and setup time (s) of each (None where there is no such trial)."""
     from suite.report.outcomes import is_cold
 
     mine = [r for r in records if r.get("planner") == planner and "warm" in r]
@@ -142,7 +142,7 @@ def cold_start(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any
 
     def med(rs, field):
         v = [float(r[field]) for r in rs if isinstance(r.get(field), (int, float))]
-        return float(np.median(v)) if v else math.nan
+        return float(np.median(v)) if v else None
 
     return {"cold_trials": len(cold), "warm_trials": len(warm),
             "planning_time_s": {"cold": med(cold, "planning_time_s"), "warm": med(warm, "planning_time_s")},
@@ -155,9 +155,9 @@ def _cold_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tu
     rows = []
     for p in planners:
         c = cold_start(records, p)
-        rows.append([p, c["cold_trials"], format_number(c["planning_time_s"]["cold"]),
-                     format_number(c["planning_time_s"]["warm"]), format_number(c["setup_time_s"]["cold"]),
-                     format_number(c["setup_time_s"]["warm"])])
+        rows.append([p, c["cold_trials"], *(format_number(math.nan if v is None else v) for v in (
+            c["planning_time_s"]["cold"], c["planning_time_s"]["warm"], c["setup_time_s"]["cold"],
+            c["setup_time_s"]["warm"]))])
     return headers, rows
 
 

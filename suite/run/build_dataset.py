@@ -231,23 +231,31 @@ def reference_job(arg: tuple) -> dict[str, Any]:
 
 
 def _references(items: list[tuple[Any, dict]], settings: BuildSettings, *, progress_bar: bool) -> dict[str, dict]:
-    """Reference solutions of the non-trivial problems, computed in worker processes."""
+    """Reference solutions of the non-trivial problems (and of the trivial ones whose straight
+    segment is not certified)."""
+    todo = [(pid, p) for pid, (p, m) in items if not m["trivial"] or not m.get("straight_certified", True)]
+    return plan_references(todo, reference_time_s=settings.reference_time_s, rrt_runs=settings.rrt_runs,
+                           paddings=tuple(settings.witness_paddings_m), jobs=settings.jobs, progress_bar=progress_bar)
+
+
+def plan_references(todo: list[tuple[str, Any]], *, reference_time_s: float, rrt_runs: int,
+                    paddings: tuple[float, ...], jobs: int, progress_bar: bool) -> dict[str, dict]:
+    """problem_id -> `reference_job`'s result for each (problem_id, problem), in worker processes;
+    a job that fails gives no reference."""
     from tqdm import tqdm
 
     from suite.run.executors import Job, LocalExecutor
     from suite.run.runner import worker_init
 
-    todo = [(pid, p) for pid, (p, m) in items if not m["trivial"] or not m.get("straight_certified", True)]
-    budget = settings.reference_time_s + 5.0 * settings.rrt_runs + 10.0
-    paddings = tuple(settings.witness_paddings_m)
-    jobs = [Job(pid, reference_job, (p, settings.reference_time_s, settings.rrt_runs, paddings),
-                3 * budget + 60 + 20 * len(paddings), group=p.scene.key()) for pid, p in todo]
+    budget = reference_time_s + 5.0 * rrt_runs + 10.0
+    work = [Job(pid, reference_job, (p, reference_time_s, rrt_runs, paddings),
+                 3 * budget + 60 + 20 * len(paddings), group=p.scene.key()) for pid, p in todo]
     out: dict[str, dict] = {}
-    if not jobs:
+    if not work:
         return out
-    ex = LocalExecutor(jobs=min(settings.jobs, len(jobs)), init=worker_init)
-    bar = tqdm(total=len(jobs), desc="references", unit="problem", disable=not progress_bar, file=sys.stderr)
-    for outcome in ex.run(jobs):
+    ex = LocalExecutor(jobs=min(jobs, len(work)), init=worker_init)
+    bar = tqdm(total=len(work), desc="references", unit="problem", disable=not progress_bar, file=sys.stderr)
+    for outcome in ex.run(work):
         out[outcome.job.key] = outcome.result if outcome.failure is None else {"reference": None, "attempts": [
             {"failure": outcome.failure, "message": outcome.message}]}
         bar.update(1)
@@ -399,6 +407,13 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
                   "built_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
                   "collect_s": round(t_collect, 1), "references_s": round(t_refs, 1)},
     }
+    write_dataset_files(out, scene_lines, records, manifest)
+    return manifest
+
+
+def write_dataset_files(out, scene_lines: list[str], records: list[dict], manifest: dict[str, Any]) -> None:
+    """Write a dataset's scenes, problems and manifest into directory `out` (created): each to a
+    temporary file first, then renamed, the manifest last (a dataset without one does not exist)."""
     out.mkdir(parents=True, exist_ok=True)
     tmp = {}
     for fname, text in ((SCENES_FILE, "\n".join(scene_lines) + "\n"),
@@ -406,6 +421,5 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
                         (MANIFEST_FILE, json.dumps(manifest, indent=1) + "\n")):
         tmp[fname] = out / (fname + ".tmp")
         tmp[fname].write_text(text)
-    for fname, path in tmp.items():  # the manifest last: a dataset without one does not exist
+    for fname, path in tmp.items():
         path.replace(out / fname)
-    return manifest

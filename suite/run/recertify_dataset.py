@@ -11,7 +11,6 @@ regions) is copied as it is; the source dataset is not touched.
 
 from __future__ import annotations
 
-import json
 import shutil
 import sys
 import time
@@ -49,34 +48,10 @@ def _verdicts(records: list[dict], scenes: dict, *, progress_bar: bool) -> dict[
     return out
 
 
-def _replan(todo: list[tuple[str, Any]], *, reference_time_s: float, rrt_runs: int, jobs: int,
-            progress_bar: bool) -> dict[str, dict]:
-    """problem_id -> reference_job's result, in worker processes."""
-    from tqdm import tqdm
-
-    from suite.run.build_dataset import reference_job
-    from suite.run.executors import Job, LocalExecutor
-    from suite.run.runner import worker_init
-
-    if not todo:
-        return {}
-    budget = reference_time_s + 5.0 * rrt_runs + 10.0
-    jobs_ = [Job(pid, reference_job, (p, reference_time_s, rrt_runs), 3 * budget + 60, group=p.scene.key())
-             for pid, p in todo]
-    out: dict[str, dict] = {}
-    ex = LocalExecutor(jobs=min(jobs, len(jobs_)), init=worker_init)
-    bar = tqdm(total=len(jobs_), desc="planning certified references", unit="problem", disable=not progress_bar,
-               file=sys.stderr)
-    for outcome in ex.run(jobs_):
-        out[outcome.job.key] = outcome.result if outcome.failure is None else {"reference": None}
-        bar.update(1)
-    bar.close()
-    return out
-
-
 def recertify_dataset(source: str, name: str, *, reference_time_s: float = 10.0, rrt_runs: int = 3, jobs: int = 2,
                       argv: list[str], progress_bar: bool = True) -> dict[str, Any]:
     """Write dataset `name`: `source` with every benchmark reference certified. Returns its manifest."""
+    from suite.run.build_dataset import plan_references, write_dataset_files
     from suite.run.lock import LOCK_FILE, RunLock
     from suite.run.runner import git_commit, versions
 
@@ -92,7 +67,8 @@ def recertify_dataset(source: str, name: str, *, reference_time_s: float = 10.0,
     todo = [(pid, problem_from_record(rec, scenes[rec["scene_key"]], time_limit_s=1.0))
             for rec in records if (pid := rec["problem_id"]) in verdicts and verdicts[pid]["verdict"] != "certified"]
     t_check = time.perf_counter() - t0
-    planned = _replan(todo, reference_time_s=reference_time_s, rrt_runs=rrt_runs, jobs=jobs, progress_bar=progress_bar)
+    planned = plan_references(todo, reference_time_s=reference_time_s, rrt_runs=rrt_runs, paddings=(), jobs=jobs,
+                              progress_bar=progress_bar)
     dropped, replaced, new_records = [], [], []
     for rec in records:
         pid = rec["problem_id"]
@@ -146,13 +122,6 @@ def recertify_dataset(source: str, name: str, *, reference_time_s: float = 10.0,
             raise SuiteError(f"dataset {name!r} already exists at {out}; choose another --name")
         if (src / "regions").is_dir() and not (out / "regions").exists():
             shutil.copytree(src / "regions", out / "regions")  # same worlds, same regions
-        tmp = {}
-        for fname, text in ((SCENES_FILE, "\n".join(scene_lines) + "\n"),
-                            (PROBLEMS_FILE, "\n".join(json.dumps(r, sort_keys=True) for r in new_records) + "\n"),
-                            (MANIFEST_FILE, json.dumps(new_manifest, indent=1) + "\n")):
-            tmp[fname] = out / (fname + ".tmp")
-            tmp[fname].write_text(text)
-        for fname, path in tmp.items():  # the manifest last: a dataset without one does not exist
-            path.replace(out / fname)
+        write_dataset_files(out, scene_lines, new_records, new_manifest)
         (out / LOCK_FILE).unlink(missing_ok=True)
     return new_manifest

@@ -250,7 +250,8 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
     path = None if result.path is None else np.asarray(result.path, float).round(10)
     metrics: dict[str, float] = {}
     certification = None
-    limit = over_limit(path) if status == PlanStatus.SUCCESS and structure_reason(problem, path, world) is None else None
+    shaped = status == PlanStatus.SUCCESS and structure_reason(problem, path, world) is None
+    limit = over_limit(path) if shaped else None
     if limit is not None:
         status = PlanStatus.INVALID_SOLUTION
         stats["reason"] = "path_over_limit"
@@ -258,7 +259,7 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
         stats["invalid_reason"] = (f"path over the judge's limit: {limit['value']} {limit['limit'].replace('_', ' ')} "
                                    f"> {limit['max']} (suite.scoring.validate)")
     elif status == PlanStatus.SUCCESS:
-        if structure_reason(problem, path, world) is None:  # the exact verdict, beside the 0.01 rad rule
+        if shaped:  # the exact verdict, beside the 0.01 rad rule
             certification = certify_path(path, world)
         reason = validate_path(problem, path, world)
         if reason is not None:

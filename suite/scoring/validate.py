@@ -23,11 +23,11 @@ MAX_CHECKED_STATES = 200_000
 
 def over_limit(path: np.ndarray) -> dict | None:
     """None if the judge takes the claimed path on, else which limit it passes: {limit, value, max}."""
+    from scenes.fcl_world import CollisionWorld
     from suite.scoring.polyline import simplify
 
-    path = np.asarray(path, float)
-    states = 1 + int(np.sum(np.maximum(1, np.ceil(np.max(np.abs(np.diff(path, axis=0)), axis=1)
-                                                      / VALIDATION_RESOLUTION_RAD)))) if len(path) > 1 else 1
+    path = np.atleast_2d(np.asarray(path, float))
+    states = 1 + int(np.sum(CollisionWorld.segment_steps(path, VALIDATION_RESOLUTION_RAD)))
     if states > MAX_CHECKED_STATES:
         return {"limit": "checked_states", "value": states, "max": MAX_CHECKED_STATES}
     corners = len(simplify(path)) if len(path) > 2 else len(path)

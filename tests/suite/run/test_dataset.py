@@ -28,6 +28,14 @@ def small(tmp_path_factory):
     return d, manifest
 
 
+def _copy(d: Path, dest: Path) -> Path:
+    """A copy of dataset directory d's files at dest, to edit."""
+    dest.mkdir()
+    for f in d.iterdir():
+        (dest / f.name).write_text(f.read_text())
+    return dest
+
+
 def test_round_trip_same_problems_and_hashes(small):
     d, manifest = small
     ds = load_dataset(str(d))
@@ -63,10 +71,7 @@ def test_quick_tier_is_a_subset_of_the_test_split(small):
 def test_verify_passes_then_catches_a_hand_edit(small, tmp_path):
     d, _ = small
     assert verify_dataset(str(d))["problems"] > 0
-    edited = tmp_path / "edited"
-    edited.mkdir()
-    for f in d.iterdir():
-        (edited / f.name).write_text(f.read_text())
+    edited = _copy(d, tmp_path / "edited")
     lines = (edited / "problems.jsonl").read_text().splitlines()
     rec = json.loads(lines[1])
     rec["q_goal"][0] += 0.05  # a hand edit of one goal
@@ -78,10 +83,7 @@ def test_verify_passes_then_catches_a_hand_edit(small, tmp_path):
 
 def test_verify_rejects_a_colliding_reference(small, tmp_path):
     d, _ = small
-    edited = tmp_path / "bad-ref"
-    edited.mkdir()
-    for f in d.iterdir():
-        (edited / f.name).write_text(f.read_text())
+    edited = _copy(d, tmp_path / "bad-ref")
     lines = (edited / "problems.jsonl").read_text().splitlines()
     k, rec = next((i, json.loads(line)) for i, line in enumerate(lines) if not json.loads(line)["trivial"])
     rec["reference"]["path"] = [rec["q_start"], rec["q_goal"]]  # the straight segment collides
@@ -160,10 +162,7 @@ def test_recertify_replaces_an_uncertified_reference_and_keeps_the_problems(smal
     from suite.run.recertify_dataset import recertify_dataset
 
     d, _ = small
-    src = tmp_path / "src"
-    src.mkdir()
-    for f in d.iterdir():
-        (src / f.name).write_text(f.read_text())
+    src = _copy(d, tmp_path / "src")
     lines = (src / "problems.jsonl").read_text().splitlines()
     k, rec = next((i, json.loads(line)) for i, line in enumerate(lines) if not json.loads(line)["trivial"])
     rec["reference"]["path"] = [rec["q_start"], rec["q_goal"]]  # collides: not certified
