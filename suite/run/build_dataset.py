@@ -19,6 +19,7 @@ Steps:
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import datetime as dt
 import json
@@ -44,6 +45,9 @@ from suite.problems.identity import problem_id, straight_line
 from suite.run.witnesses import choose_witness
 
 log = logging.getLogger(__name__)
+
+#: Budget (s) of each optimizing planner tried for a problem's best known path.
+OPTIMIZER_BUDGET_S = 5.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,6 +75,11 @@ class BuildSettings:
             `recycle-v1` and `recycle-v2` were split; a manifest without this setting was).
         witness_paddings_m: obstacle paddings a witness with a margin is searched with, in turn
             (`witness_search`; empty: the reference is the witness).
+        goal_clearance_m: the goal IK's least distance to the scene (`build_problems`; a manifest
+            without this setting was posed at 0.001).
+        reference_optimizers: optimizing planners also tried for the best known path, as tuned
+            and seeded from the problem alone, OPTIMIZER_BUDGET_S each (`gcs` is not: its regions
+            are built per world offline, which a build does not do).
         tier_rule: "balanced" (`dataset_splits.balanced_tier`: no family above 25% of the tier's
             non-trivial problems, every family with 20 or more non-trivial test problems at 8% or
             more) or "round-robin" (whole test scenes of every family in turn, as before).
@@ -91,13 +100,16 @@ class BuildSettings:
     split_rule: str = "stratified"
     tier_rule: str = "balanced"
     witness_paddings_m: tuple[float, ...] = (0.003, 0.0015)
+    reference_optimizers: tuple[str, ...] = ("trajopt",)
+    goal_clearance_m: float = 0.002
 
 
 def pose_settings(manifest: dict[str, Any]) -> dict[str, Any]:
     """The `build_problems` keyword arguments a dataset's cycles were posed with (from its manifest),
     to pose them again identically; datasets built before a setting existed were built without it."""
     settings = manifest.get("build", {}).get("settings", {})
-    return {"bin_warm_start": bool(settings.get("bin_warm_start", False))}
+    return {"bin_warm_start": bool(settings.get("bin_warm_start", False)),
+            "goal_clearance_m": float(settings.get("goal_clearance_m", 0.001))}
 
 
 def family_spec(family: str, cans: int | None):
@@ -129,7 +141,8 @@ def collect(settings: BuildSettings, *, progress=None) -> tuple[list, list[tuple
             try:
                 scene = generate_scene(spec, seed=seed)
                 problems = build_problems(scene, [truth_grasp(scene, c) for c in scene.cans],
-                                          time_limit_s=1.0, seed=seed, bin_warm_start=settings.bin_warm_start)
+                                          time_limit_s=1.0, seed=seed, bin_warm_start=settings.bin_warm_start,
+                                          goal_clearance_m=settings.goal_clearance_m)
             except SuiteError as exc:
                 log.info("%s seed %d skipped: %s", family, seed, exc)
                 seed += 1
@@ -202,9 +215,12 @@ def reference_job(arg: tuple) -> dict[str, Any]:
 
     problem, budget_s, rrt_runs = arg[:3]
     paddings = arg[3] if len(arg) > 3 else ()
+    optimizers = arg[4] if len(arg) > 4 else ()
     world = collision_world(problem)
     attempts = [("aorrtc", {"simplifier": "rope+full", "simplify_time_s": 1.0}, budget_s, 1)]
     attempts += [("rrt", {"simplifier": "rope+full", "simplify_time_s": 0.5}, 5.0, 100 + k) for k in range(rrt_runs)]
+    # optimizers as tuned, seeded from the problem alone (never from another attempt's path)
+    attempts += [(name, {}, OPTIMIZER_BUDGET_S, 0) for name in optimizers]
     best, tried = None, []
     for name, cfg, budget, seed in attempts:
         t0 = time.perf_counter()
@@ -222,7 +238,8 @@ def reference_job(arg: tuple) -> dict[str, Any]:
         if verdict != "certified":  # a witness must be free between the validator's samples too
             continue
         if best is None or length < best["length_rad"]:
-            best = {"path": path.round(12).tolist(), "length_rad": length, "planner": name, "config": cfg,
+            best = {"path": path.round(12).tolist(), "length_rad": length, "planner": name,
+                    "config": cfg or {"tuned": True},
                     "time_s": round(elapsed, 3)}
     from suite.run.witnesses import witness_search
 
@@ -235,11 +252,13 @@ def _references(items: list[tuple[Any, dict]], settings: BuildSettings, *, progr
     segment is not certified)."""
     todo = [(pid, p) for pid, (p, m) in items if not m["trivial"] or not m.get("straight_certified", True)]
     return plan_references(todo, reference_time_s=settings.reference_time_s, rrt_runs=settings.rrt_runs,
-                           paddings=tuple(settings.witness_paddings_m), jobs=settings.jobs, progress_bar=progress_bar)
+                           paddings=tuple(settings.witness_paddings_m), jobs=settings.jobs, progress_bar=progress_bar,
+                           optimizers=tuple(settings.reference_optimizers))
 
 
 def plan_references(todo: list[tuple[str, Any]], *, reference_time_s: float, rrt_runs: int,
-                    paddings: tuple[float, ...], jobs: int, progress_bar: bool) -> dict[str, dict]:
+                    paddings: tuple[float, ...], jobs: int, progress_bar: bool,
+                    optimizers: tuple[str, ...] = ()) -> dict[str, dict]:
     """problem_id -> `reference_job`'s result for each (problem_id, problem), in worker processes;
     a job that fails gives no reference."""
     from tqdm import tqdm
@@ -247,8 +266,8 @@ def plan_references(todo: list[tuple[str, Any]], *, reference_time_s: float, rrt
     from suite.run.executors import Job, LocalExecutor
     from suite.run.runner import worker_init
 
-    budget = reference_time_s + 5.0 * rrt_runs + 10.0
-    work = [Job(pid, reference_job, (p, reference_time_s, rrt_runs, paddings),
+    budget = reference_time_s + 5.0 * rrt_runs + OPTIMIZER_BUDGET_S * len(optimizers) + 10.0
+    work = [Job(pid, reference_job, (p, reference_time_s, rrt_runs, paddings, optimizers),
                  3 * budget + 60 + 20 * len(paddings), group=p.scene.key()) for pid, p in todo]
     out: dict[str, dict] = {}
     if not work:
@@ -395,6 +414,8 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
         "references_certified": True,
         "witness_clearance_m": _clearance_summary([r["witness"]["clearance_min_m"] for r in records
                                                    if r["benchmark"] and not r["trivial"]]),
+        "best_known_by": dict(sorted(collections.Counter(
+            r["reference"]["planner"] for r in records if r["benchmark"] and not r["trivial"]).items())),
         "rules_broken": rules,  # the split and tier rules (suite.run.dataset_splits) this build could not meet  # every reference passed the exact check (`dataset verify` enforces it)
         "tiers": {"quick": quick},
         "splits": ({"tune": f"every {settings.tune_every}th scene of each family (the first, then every {settings.tune_every}th)",
