@@ -49,6 +49,7 @@ from pydrake.multibody.inverse_kinematics import (
 from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import PiecewisePose
 
+from planners.drake_queries import EvaluationCounter, query_stats
 from planners.base import PROBLEM_KINDS, PlanningProblem, PlanResult, PlanStatus, check_endpoints
 from scenes.errors import SuiteError
 from planners.worlds import collision_world, drake_plan_scene, remember
@@ -137,6 +138,8 @@ class _KnotProgram:
         self.distance_binding = None
         self.distance_near = None
         self.cost = prog.AddQuadraticErrorCost(np.eye(7), np.zeros(7), self.q)
+        self.evaluations = EvaluationCounter()  # one distance query per evaluation (drake_queries)
+        prog.AddVisualizationCallback(self.evaluations, self.q)
         self.solver = SnoptSolver()
         self.options = SolverOptions()
         self.options.SetOption(SnoptSolver.id(), "Major iterations limit", config.major_iterations)
@@ -208,6 +211,16 @@ class NominalIkPlanner:
                 or (kind == "lift" and t <= t0 + w + 1e-9))
 
     def plan(self, problem: PlanningProblem) -> PlanResult:
+        """`_plan`, with its Drake distance queries counted and timed (`planners.drake_queries`)."""
+        program = self._program(problem)
+        calls0 = program.evaluations.calls
+        program.evaluations.restart()
+        result = self._plan(problem)
+        queries = program.evaluations.calls - calls0  # the iterates are q itself, one binding
+        result.stats.update(query_stats(queries, program.distance[False], program.evaluations.sample))
+        return result
+
+    def _plan(self, problem: PlanningProblem) -> PlanResult:
         world = collision_world(problem)
         bad = check_endpoints(problem, world)
         if bad is not None:

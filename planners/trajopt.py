@@ -34,6 +34,7 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import BsplineTrajectory
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.drake_queries import EvaluationCounter, query_stats
 from scenes.errors import SuiteError
 from planners.worlds import collision_world, drake_plan_scene, remember
 
@@ -171,11 +172,12 @@ class TrajoptPlanner:
         starts: it depends on the world only, as the sampling planners' collision world)."""
         self._plant(problem)
 
-    def _via_point(self, problem: PlanningProblem, plant, plant_context, G) -> np.ndarray | None:
+    def _via_point(self, problem: PlanningProblem, plant, plant_context, G, counter=None) -> np.ndarray | None:
         """A configuration near the problem's middle task waypoint, or None.
 
         Loose IK (position within `via_position_tolerance_m`, orientation within
-        `via_orientation_tolerance_rad`, the distance constraint) closest to the start-goal midpoint.
+        `via_orientation_tolerance_rad`, the distance constraint) closest to the start-goal midpoint;
+        `counter` counts its evaluations (one distance query each).
         """
         if len(problem.waypoints) < 3:
             return None
@@ -191,8 +193,21 @@ class TrajoptPlanner:
         prog = ik.get_mutable_prog()
         prog.AddQuadraticErrorCost(np.eye(7), q_mid, ik.q())
         prog.SetInitialGuess(ik.q(), q_mid)
+        if counter is not None:
+            prog.AddVisualizationCallback(counter, ik.q())
         result = SnoptSolver().Solve(prog)
         return result.GetSolution(ik.q()) if result.is_success() else None
+
+    def _queries(self, trajopt, prog, distance, evaluations, samples: list, queries: int) -> dict:
+        """`planners.drake_queries.query_stats`: the count, and the seconds replayed at the sampled
+        iterates, each at one of the constraint's path samples (in turn)."""
+        cps = trajopt.control_points()
+        idx = np.array(prog.FindDecisionVariableIndices(cps.flatten(order="F"))).reshape(cps.shape, order="F")
+        at = []
+        for k, x in enumerate(evaluations.sample):
+            traj = BsplineTrajectory(trajopt.basis(), [x[idx[:, j]][:, None] for j in range(cps.shape[1])])
+            at.append(traj.value(samples[k % len(samples)]).ravel())
+        return query_stats(queries, distance, np.array(at), num_derivatives=self.config.spline_order * cps.shape[0])
 
     def plan(self, problem: PlanningProblem) -> PlanResult:
         world = collision_world(problem)
@@ -228,8 +243,10 @@ class TrajoptPlanner:
 
         guess = "straight"
         via = None
+        via_evaluations = EvaluationCounter()
         if cfg.initial_guess == "via_waypoints":
-            via = self._via_point(problem, plant, plant_context, plant.GetFrameByName("body", ds.wsg))
+            via = self._via_point(problem, plant, plant_context, plant.GetFrameByName("body", ds.wsg),
+                                  via_evaluations)
         if via is not None:
             guess = "via_waypoints"
             u = np.linspace(0, 1, cfg.num_control_points)[:, None]
@@ -239,8 +256,11 @@ class TrajoptPlanner:
         trajopt.SetInitialGuess(BsplineTrajectory(trajopt.basis(), [c[:, None] for c in ctrl]))
 
         out_of_time = []
+        evaluations = EvaluationCounter()
+        queries = [via_evaluations.calls]  # per solve: evaluations x the distance bindings then
 
-        def stop_at_deadline(_x) -> None:  # evaluated with every cost and constraint evaluation
+        def stop_at_deadline(x) -> None:  # evaluated with every cost and constraint evaluation
+            evaluations(x)
             if time.perf_counter() >= deadline:
                 out_of_time.append(True)
                 raise _OutOfTime
@@ -258,13 +278,16 @@ class TrajoptPlanner:
         for attempt in range(cfg.max_resolves + 1):
             if attempt > 0:
                 prog.SetInitialGuess(prog.decision_variables(), result.GetSolution(prog.decision_variables()))
+            calls0 = evaluations.calls
             try:
                 result = solver.Solve(prog, None, options)
             except RuntimeError:
                 if not out_of_time:
                     raise
+                queries.append((evaluations.calls - calls0) * len(samples))
                 stats.update(resolves=attempt, solve_interrupted=True)
                 break  # past the deadline: the TIMEOUT below
+            queries.append((evaluations.calls - calls0) * len(samples))
             stats["resolves"] = attempt
             stats["solver_status"] = result.get_solution_result().name
             stats["snopt_info"].append(int(result.get_solver_details().info))
@@ -286,6 +309,7 @@ class TrajoptPlanner:
             stats["colliding_samples"].append(int(len(s_bad)))
             if len(s_bad) == 0:
                 stats.update(constraint_samples=len(samples), solve_time_s=time.perf_counter() - t0)
+                stats.update(self._queries(trajopt, prog, distance, evaluations, samples, sum(queries)))
                 return PlanResult(PlanStatus.SUCCESS, path, stats)
             reason = "path still collides after the last re-solve"
             if time.perf_counter() >= deadline:
@@ -295,6 +319,7 @@ class TrajoptPlanner:
                 trajopt.AddPathPositionConstraint(distance, float(s))
             samples += new
         stats.update(constraint_samples=len(samples), solve_time_s=time.perf_counter() - t0)
+        stats.update(self._queries(trajopt, prog, distance, evaluations, samples, sum(queries)))
         if time.perf_counter() >= deadline:
             stats["reason"] = "time limit reached"
             return PlanResult(PlanStatus.TIMEOUT, None, stats)

@@ -16,6 +16,7 @@ TARGETS = {
     "regions": "suite.bench.regions",
     "single-tree": "suite.bench.single_tree",
     "certify": "suite.bench.certify",
+    "attribution": "suite.bench.attribution",
 }
 
 

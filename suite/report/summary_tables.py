@@ -192,10 +192,10 @@ def _attribution_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]
 
 
 ATTRIBUTION_INTRO = (
-    "Medians over warm trials of what a planning time went to: the collision queries the planner asked "
-    "(python-fcl state checks, timed around each call from Python) and the rest (the planner's own work and "
-    "the Python around it). `ik`, `trajopt` and `gcs` query Drake's geometry inside C++ solvers and are not "
-    "counted yet.")
+    "Medians over warm trials of what a planning time went to: the collision and distance queries the planner "
+    "asked, and the rest (the planner's own work and the Python around it). python-fcl state checks (every "
+    "planner's motion checks) are clocked around each call; the distance queries SNOPT makes through Drake's "
+    "constraint (`ik`, `trajopt`) are counted exactly and timed by calibration (docs/timing.md).")
 
 
 COLD_INTRO = (

@@ -181,6 +181,7 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
     except Exception as exc:  # a bad config or a planner bug is this trial's error, not the run's
         result = _error_result(spec, exc)
     record["setup_time_s"] = time.perf_counter() - t_setup
+    checks0, query0 = world.checks, world.query_s
     t0 = time.perf_counter()
     if result is None:
         try:
@@ -190,26 +191,44 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
         except Exception as exc:
             result = _error_result(spec, exc)
     planning_time_s = time.perf_counter() - t0
+    fcl = (world.checks - checks0, world.query_s - query0)  # before the judge queries the world too
     record["warm"] = spec.planner in _PLANNED  # False: this worker's first trial of the planner
     _PLANNED.add(spec.planner)
     record = judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s)
-    attribution = attribute(record["stats"], planning_time_s)
+    attribution = attribute(record["stats"], planning_time_s, fcl)
     if attribution is not None:
         record["attribution"] = attribution
     return record
 
 
-def attribute(stats: dict[str, Any], planning_time_s: float) -> dict[str, Any] | None:
-    """Where a planning time went, for planners that count and time their collision queries
-    (`stats.collision_checks`, `stats.collision_query_s`: the python-fcl world's state checks and
-    their seconds, the OMPL planners): queries, query_s, s_per_query, other_s (the planner's own
-    work and the Python around it) and query_share. None for a planner that does not count them
-    (ik, trajopt and gcs query Drake's geometry in C++; not instrumented yet)."""
-    n, q_s = stats.get("collision_checks"), stats.get("collision_query_s")
-    if not isinstance(n, int) or not isinstance(q_s, (int, float)) or not planning_time_s > 0:
+def attribute(stats: dict[str, Any], planning_time_s: float,
+              fcl: tuple[int, float] | None = None) -> dict[str, Any] | None:
+    """Where a planning time went: the collision and distance queries, and the rest.
+
+    `fcl` is (state checks, seconds) the python-fcl world answered during `plan()` (clocked around
+    each call; every planner checks motions with it: the sampling planners all the time, `ik`
+    between knots, `trajopt` and `gcs` on their results); without it, the planner's own
+    `stats.collision_checks` / `stats.collision_query_s`. `stats.drake_distance_queries` /
+    `stats.drake_distance_query_s` are the distance queries SNOPT made through Drake's constraint
+    (`ik`, `trajopt`: counted exactly, timed by calibration; `planners.drake_queries`).
+
+    Returns {engine, queries, query_s, s_per_query, other_s, query_share, parts: {engine: {queries,
+    query_s, timing}}}, or None when nothing was counted.
+    """
+    parts: dict[str, dict[str, Any]] = {}
+    n, q_s = fcl if fcl is not None else (stats.get("collision_checks"), stats.get("collision_query_s"))
+    if isinstance(n, int) and isinstance(q_s, (int, float)):
+        parts["python-fcl"] = {"queries": n, "query_s": float(q_s), "timing": "clocked"}
+    dn, d_s = stats.get("drake_distance_queries"), stats.get("drake_distance_query_s")
+    if isinstance(dn, int) and dn > 0 and isinstance(d_s, (int, float)):
+        parts["drake"] = {"queries": dn, "query_s": float(d_s), "timing": "replayed"}
+    if not parts or not planning_time_s > 0:
         return None
-    return {"engine": "python-fcl", "queries": n, "query_s": q_s, "s_per_query": q_s / n if n else None,
-            "other_s": max(planning_time_s - q_s, 0.0), "query_share": min(q_s / planning_time_s, 1.0)}
+    n_all = sum(p["queries"] for p in parts.values())
+    s_all = sum(p["query_s"] for p in parts.values())
+    return {"engine": "+".join(parts), "queries": n_all, "query_s": s_all,
+            "s_per_query": s_all / n_all if n_all else None, "other_s": max(planning_time_s - s_all, 0.0),
+            "query_share": min(s_all / planning_time_s, 1.0), "parts": parts}
 
 
 #: A success returned later than its budget by more than this share of it plus LATE_GRACE_S is a

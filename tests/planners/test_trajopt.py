@@ -36,6 +36,9 @@ def test_transit_is_solved_collision_free(variant, open_transit, wall_transit):
     assert s["constraint_samples"] >= TrajoptConfig().num_collision_samples
     assert TrajoptConfig().min_duration_s <= s["duration_s"] <= TrajoptConfig().max_duration_s
     assert s["cost"] > 0 and 0 < s["solve_time_s"] < p.time_limit_s + 1.0
+    # every SNOPT evaluation queries each distance-constraint sample once; their time is replayed
+    assert s["drake_distance_queries"] >= s["constraint_samples"] and s["drake_distance_queries"] % 1 == 0
+    assert 0 < s["drake_distance_query_s"] < s["solve_time_s"] + 1.0
 
 
 def test_a_solve_running_past_the_budget_is_stopped_there(wall_transit):
