@@ -28,7 +28,8 @@ OBJECTIVE: dict[str, str] = {
 #: The search: each setting's candidate values (the grid is their product). Small on purpose: a
 #: tuning run must fit a session on 2 cores; the first value of each is the class default.
 SEARCH_SPACES: dict[str, dict[str, tuple]] = {
-    "rrt": {"range_rad": (None, 1.0, 0.5), "simplifier": ("rope", "rope+full")},
+    # None: OMPL's own range (a fifth of the space's extent, about 2.8 rad here), and steps around it
+    "rrt": {"range_rad": (None, 2.0, 1.0, 0.5), "simplifier": ("rope", "rope+full")},
     "rrtstar": {"range_rad": (None, 1.0, 0.5, 0.25), "goal_bias": (0.05, 0.2)},
     "bitstar": {"samples_per_batch": (100, 400), "range_rad": (None, 1.0)},
     "aorrtc": {"range_rad": (None, 1.0, 0.5)},

@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
 def _tune(args: argparse.Namespace, out: Path) -> int:
     from planners.registry import planner_class
     from planners.tuned import OBJECTIVE, config_path
-    from suite.report.tuning import RULE, choose, evaluate, table_rows, weak_families
+    from suite.report.tuning import RULE, WEIGHTINGS, choose, evaluate, table_rows, weak_families
     from suite.run.records import read_trials
     from suite.run.runner import run_trials
     from suite.run.trial import config_dict, make_config, make_trial
@@ -127,19 +127,23 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
         evaluated.append((settings, [r for r in read_trials(run_dir) if r["trial_id"] in wanted]))
     results = evaluate(evaluated)
     objective = OBJECTIVE.get(args.planner, "time")
-    chosen = choose(results, objective=objective)
-    rows = table_rows(results, chosen=chosen)
+    chosen = choose(results, objective=objective, weighting="family")
+    pooled = choose(results, objective=objective, weighting="pooled")
+    rows = table_rows(results, chosen=chosen, pooled=pooled)
     _print_table(rows)
     weak = weak_families(results, chosen=chosen)
-    print(f"chosen ({objective} objective): {json.dumps(results[chosen].settings, default=str)}"
+    print(f"chosen ({objective} objective, families weigh equally): {json.dumps(results[chosen].settings, default=str)}"
           + (f"; under 50% on {', '.join(weak)} where another candidate does better" if weak else ""))
+    print(f"pooled over problems (the rule before recycle-v3) it would be: {json.dumps(results[pooled].settings, default=str)}")
     if args.write:
         data = {
             "planner": args.planner,
             "settings": results[chosen].settings,
             "chosen_by": "python -m suite " + " ".join(sys.argv[1:]) if sys.argv[1:2] == ["tune"] else "suite tune",
             "rule": RULE,
+            "weighting": f"family: {WEIGHTINGS['family']}",
             "objective": objective,
+            "pooled_choice": {"settings": results[pooled].settings, "weighting": f"pooled: {WEIGHTINGS['pooled']}"},
             "dataset": {"name": ds.name, "hash": ds.hash, "split": "tune", "problems": len(problems),
                         "per_family": args.per_family, "non_trivial_only": True},
             "time_limit_s": args.time_limit_s,
@@ -156,10 +160,13 @@ def _print_table(rows: list[dict]) -> None:
     from tabulate import tabulate
 
     families = sorted({f for r in rows for f in r["by_family"]})
-    headers = ["", "settings", "solved", *families, "time to solve (s)", "planning time (s)", "length ratio (common)"]
-    body = [["*" if r["chosen"] else "", json.dumps(r["settings"], default=str), r["solved"],
-             *(r["by_family"].get(f, "-") for f in families), r["time_to_solve_median_s"],
-             r["planning_time_median_s"], r["length_ratio_common_median"]] for r in rows]
+    headers = ["", "settings", "solved", *families, "time to solve (s)", "per family (s)", "length ratio",
+               "per family"]
+    body = [[("*" if r["chosen"] else "") + ("p" if r.get("chosen_pooled") else ""), json.dumps(r["settings"], default=str),
+             r["solved"], *(r["by_family"].get(f, "-") for f in families), r["time_to_solve_median_s"],
+             r["family_time_to_solve_median_s"], r["length_ratio_common_median"],
+             r["family_length_ratio_common_median"]] for r in rows]
+    print("* chosen (families weigh equally); p: the choice pooled over problems")
     print(tabulate(body, headers=headers, tablefmt="simple", missingval="n/a"))
 
 

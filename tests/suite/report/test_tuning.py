@@ -41,15 +41,15 @@ def _result(solved, time_s, ratio, by_family=None):
 
 def test_choice_rule_success_first_then_the_objective_then_order():
     results = [_result(8, 0.1, 1.5), _result(9, 0.9, 1.9), _result(9, 0.3, 1.2), _result(9, 0.3, 1.2)]
-    assert choose(results, objective="time") == 2  # most solved, then fastest, then the earlier
-    assert choose(results, objective="length") == 2
-    assert choose([_result(9, 0.3, 1.4), _result(9, 0.9, 1.1)], objective="length") == 1
-    assert choose([_result(9, math.nan, math.nan), _result(9, 0.5, 1.3)], objective="time") == 1
+    assert choose(results, objective="time", weighting="pooled") == 2  # most solved, then fastest, then the earlier
+    assert choose(results, objective="length", weighting="pooled") == 2
+    assert choose([_result(9, 0.3, 1.4), _result(9, 0.9, 1.1)], objective="length", weighting="pooled") == 1
+    assert choose([_result(9, math.nan, math.nan), _result(9, 0.5, 1.3)], objective="time", weighting="pooled") == 1
     # within the tolerance the earlier candidate (the defaults) keeps it: 1% in length, 10% in time
-    assert choose([_result(9, 0.3, 1.005), _result(9, 0.3, 1.0)], objective="length") == 0
-    assert choose([_result(9, 0.3, 1.02), _result(9, 0.3, 1.0)], objective="length") == 1
-    assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.0)], objective="time") == 0
-    assert choose([_result(9, 0.2, 1.0), _result(9, 0.1, 1.0)], objective="time") == 1
+    assert choose([_result(9, 0.3, 1.005), _result(9, 0.3, 1.0)], objective="length", weighting="pooled") == 0
+    assert choose([_result(9, 0.3, 1.02), _result(9, 0.3, 1.0)], objective="length", weighting="pooled") == 1
+    assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 0
+    assert choose([_result(9, 0.2, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 1
 
 
 def test_weak_family_is_flagged_only_when_another_candidate_does_better():
@@ -64,11 +64,11 @@ def test_a_candidate_weak_where_another_does_better_is_out_of_the_choice():
     # ik on recycle-v2's tune split: a tie in problems solved, the faster one weaker on window
     slow = _result(67, 0.196, 1.43, {"window": (8, 31), "clutter": (14, 24)})
     fast = _result(67, 0.149, 1.46, {"window": (6, 31), "clutter": (15, 24)})
-    assert choose([slow, fast], objective="time") == 0
+    assert choose([slow, fast], objective="time", weighting="pooled") == 0
     # when every candidate is weak somewhere, the plain rule decides
     a = _result(5, 0.2, 1.0, {"window": (1, 4), "wall": (4, 6)})
     b = _result(4, 0.1, 1.0, {"window": (3, 4), "wall": (1, 6)})
-    assert choose([a, b], objective="time") == 0
+    assert choose([a, b], objective="time", weighting="pooled") == 0
 
 
 def test_evaluate_counts_distinct_problems_and_the_common_subset():
@@ -83,7 +83,7 @@ def test_evaluate_counts_distinct_problems_and_the_common_subset():
     assert (a.solved, a.problems, b.solved) == (3, 4, 4)
     assert (a.time_to_solve_median_s, b.time_to_solve_median_s) == (pytest.approx(0.1), pytest.approx(0.4))
     assert (a.length_ratio_common_median, b.length_ratio_common_median) == (1.0, 2.0)  # seeds 0-2 only
-    assert choose([a, b], objective="time") == 1  # solving more wins before speed
+    assert choose([a, b], objective="time", weighting="pooled") == 1  # solving more wins before speed
 
 
 def test_tuned_settings_are_the_defaults_and_overrides_win(tmp_path, monkeypatch):
@@ -131,3 +131,31 @@ def test_a_tuning_directory_in_use_is_refused_in_one_line(tmp_path, capsys):
     assert len(err) == 1 and "is in use by another tuning" in err[0]
     assert main(["tune", "--planner", "nope", "--out", str(tmp_path / "never")]) == 2
     assert not (tmp_path / "never").exists()  # a bad planner fails before anything is written
+
+
+def test_family_weighting_lets_no_family_outvote_another():
+    """Pooled, a fast easy family with many problems decides; weighed by family, the hard one
+    counts as much: 'a' is faster on 30 wall problems, 'b' on 10 window ones and as fast on wall."""
+    def fam(solved_mean, time_s, pooled_time_s):
+        return dataclasses.replace(_result(40, pooled_time_s, 1.0), family_solved_mean=solved_mean,
+                                   family_time_to_solve_median_s=time_s, family_length_ratio_common_median=1.0)
+
+    a, b = fam(1.0, 1.0, 0.10), fam(1.0, 0.6, 0.12)
+    assert choose([a, b], objective="time", weighting="pooled") == 0
+    assert choose([a, b], objective="time", weighting="family") == 1
+    # solving more of every family still comes first
+    c = dataclasses.replace(b, family_solved_mean=0.95)
+    assert choose([a, c], objective="time", weighting="family") == 0
+    with pytest.raises(ValueError, match="weighting"):
+        choose([a], objective="time", weighting="median")
+
+
+def test_evaluate_gives_each_family_one_vote():
+    recs = [record("rrt", seed=i, length_rad=1.0, time_s=0.1) for i in range(3)]
+    hard = record("rrt", seed=9, status="timeout", time_s=5.0, variant="window")
+    for r in recs:
+        r["metrics"]["length_ratio"] = 1.0
+    (a,) = evaluate([({}, recs + [hard])])
+    assert sorted(a.by_family) == ["open", "window"]
+    assert a.family_solved_mean == pytest.approx(0.5)  # 3/3 on one family, 0/1 on the other
+    assert a.family_time_to_solve_median_s == pytest.approx((0.1 + 5.0) / 2)
