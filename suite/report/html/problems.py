@@ -185,8 +185,14 @@ def load_world(problems: Sequence[Problem], manifest: dict[str, Any]) -> World:
                                 cans_seen=1 + max(int(q.first["can_id"]) for q in problems))
         if scene is not None:
             scenes[key] = scene
-    return World(scenes, {}, {}, "Scenes generated again from the run's spec and seeds, with every can at its "
-                                 "starting place (a generated run does not record which were already recycled).")
+    wanted = {p.first.get("scene_key") for p in problems}
+    if not scenes:
+        note = "The scenes are not drawn: they cannot be generated again as the run recorded them (spec and seed)."
+    else:
+        note = ("Scenes generated again from the run's spec and seeds, with every can at its starting place (a "
+                "generated run does not record which were already recycled)")
+        note += "." if len(scenes) == len(wanted) else f"; {len(wanted) - len(scenes)} of {len(wanted)} could not be."
+    return World(scenes, {}, {}, note)
 
 
 def drawing_json(problems: Sequence[Problem], *, planners: Sequence[str], world: World) -> dict[str, Any]:
