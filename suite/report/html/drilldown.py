@@ -30,8 +30,7 @@ TRIAL_COLUMNS: tuple[tuple[str, Any], ...] = (
     ("timing (s)", lambda r: format_number(metric(r, "timing_time_s"))),
     ("length (rad)", lambda r: format_number(metric(r, "path_length_rad"))),
     ("length / ref.", lambda r: format_number(metric(r, "length_ratio"))),
-    ("gripper path (m)", lambda r: format_number(metric(r, "ee_path_length_m"))),
-    ("min clearance (mm)", lambda r: format_number(1000 * metric(r, "clearance_min_m"))),
+    ("clearance (mm)", lambda r: format_number(1000 * metric(r, "clearance_min_m"))),
     ("duration (s)", lambda r: format_number(metric(r, "duration_s"))),
     ("SPARC", lambda r: format_number(metric(r, "sparc"))),
     ("turning (rad)", lambda r: format_number(metric(r, "turning_angle_rad"))),
@@ -133,7 +132,7 @@ def _facts(p: Problem) -> str:
 
 def _trial_rows(p: Problem, planners: Sequence[str]) -> tuple[str, str]:
     """The drill-down's per-trial table and its solver statistics."""
-    head = "".join(f"<th>{esc(h)}</th>" for h in ("planner", "status", "reason", "exact verdict",
+    head = "".join(f"<th>{esc(h)}</th>" for h in ("planner", "status", "reason", "verdict",
                                                  *(c for c, _ in TRIAL_COLUMNS)))
     rows, stats = [], []
     for pl in planners:
@@ -181,7 +180,7 @@ def drilldown(p: Problem, *, planners: Sequence[str], run_dir: Path, command_dir
         '<div class="views"></div>'
         '<h4>Joint paths over path length</h4><div class="joints"></div>'
         '<h4>3-D replay</h4>'
-        f'<p>A Meshcat replay of every planner\'s timed path (about 3.5 MB each, so written on demand rather than '
+        f'<p>A Meshcat replay of every planner\'s timed path (about 3 MB each: written on demand rather than '
         f'inlined for every problem): <code class="cmd">{esc(command)}</code>{link}</p>'
         '</section>'
     )

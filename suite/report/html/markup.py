@@ -25,7 +25,7 @@ def _is_number(cell: Any) -> bool:
         return False
     if isinstance(cell, (int, float)):
         return True
-    return bool(re.fullmatch(r"-?[\d.]+(e[-+]?\d+)?( \[.*\])?|n/a|-", str(cell)))
+    return bool(re.fullmatch(r"-?[\d.]+(e[-+]?\d+)?( \[.*\])?|n/a|-|", str(cell)))
 
 
 _SUCCESS = re.compile(r"(\S+) \((\d+%) (\[[^\]]*\])\)")
@@ -66,4 +66,4 @@ def table(headers: Sequence[str], rows: Sequence[Sequence[Any]], *, cls: str = "
 def png_img(path: Path, *, alt: str) -> str:
     """The PNG inlined as a data URI (the page needs no file beside it)."""
     data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
-    return f'<img src="data:image/png;base64,{data}" alt="{esc(alt)}" loading="lazy">'
+    return f'<img src="data:image/png;base64,{data}" alt="{esc(alt)}">'

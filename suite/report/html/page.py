@@ -84,7 +84,7 @@ def render(
            ("problems", f"Problems ({len(problems)})")]
     body = [
         _section("overview", "Overview", sections.overview_html(run_dir, records, summary, planners) + plots_note),
-        _section("families", "Per scene family", sections.families_html(run_dir, records, summary)),
+        _section("families", "Per scene family", sections.families_html(run_dir, records, summary, planners)),
         _section("failures", "Failures", sections.failures_html(run_dir, records, summary, planners)),
         _section("problems", "Problems", problems_body),
     ]

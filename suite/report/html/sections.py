@@ -15,7 +15,7 @@ from typing import Any
 
 from suite.report.html.markup import esc, inline_md, png_img, table
 from suite.report.plots_common import PLOTS_DIR
-from suite.report.summary_stats import N_RESAMPLES, PairedComparison, RunSummary
+from suite.report.summary_stats import N_RESAMPLES, GroupSummary, PairedComparison, RunSummary
 from suite.report.summary_tables import (
     ATTRIBUTION_INTRO,
     CERTIFICATION_INTRO,
@@ -86,7 +86,19 @@ def headline_facts(run_dir: Path, manifest: dict[str, Any], records: Sequence[di
               else "generated scenes")
     return (f'<p class="facts">{len(records)} trials &middot; {len(planners)} planners '
             f'({esc(", ".join(planners))}) &middot; {source} &middot; budget {esc(_budgets(records))} per problem'
-            f'</p><p class="facts">{esc(composition(records))}</p>')
+            f'</p><p class="facts">{esc(composition(records))}</p>' + _provenance_line(manifest))
+
+
+def _provenance_line(manifest: dict[str, Any]) -> str:
+    """Hash, commit, machine, versions and date in one line (the full table is under Run settings)."""
+    ds, machine, versions = manifest.get("dataset") or {}, manifest.get("machine") or {}, manifest.get("versions") or {}
+    parts = [f"dataset hash {ds['hash']}" if ds.get("hash") else "",
+             f"git {str(manifest['git_commit'])[:10]}" if manifest.get("git_commit") else "",
+             f"{machine.get('cpu', '?')}, {machine.get('cores', '?')} cores" if machine else "",
+             ", ".join(f"{k} {versions[k]}" for k in ("drake", "ompl", "python-fcl", "toppra") if k in versions),
+             f"started {manifest['started_utc']}" if manifest.get("started_utc") else ""]
+    shown = " &middot; ".join(esc(p) for p in parts if p)
+    return f'<p class="facts">{shown} &middot; <a href="#settings">all settings</a></p>' if shown else ""
 
 
 def settings_html(manifest: dict[str, Any], records: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:
@@ -145,13 +157,42 @@ def overview_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: Run
     return "".join(out)
 
 
-def families_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: RunSummary) -> str:
-    """Per scene family and per problem kind."""
-    out = []
+def success_matrix(groups: Sequence[GroupSummary], overall: Sequence[GroupSummary], *, key: str,
+                   planners: Sequence[str], title: str) -> str:
+    """Success per group (rows) and planner (columns): solved/n, rate and Wilson interval, shaded by rate."""
+    cells = {(getattr(g, key), g.planner): g for g in groups}
+    names = list(dict.fromkeys(getattr(g, key) for g in groups))
+    head = "".join(f"<th class=num>{esc(p)}</th>" for p in planners)
+    rows = []
+    for name, source in [(n, cells) for n in names] + [("all", {("all", g.planner): g for g in overall})]:
+        tds = []
+        for p in planners:
+            g = source.get((name, p))
+            if g is None or not g.n:
+                tds.append("<td class=num>-</td>")
+                continue
+            lo, hi = g.success_ci95
+            shade = f"hsl({round(120 * g.success_rate)}, 55%, {round(93 - 6 * g.success_rate)}%)"
+            k = f"{g.successes:g}" if float(g.successes).is_integer() else f"{g.successes:.1f}"
+            tds.append(f'<td class="num rate" style="background:{shade}">{k}/{g.n} ({100 * g.success_rate:.0f}%)'
+                       f'<span class="cell-q">[{100 * lo:.0f}, {100 * hi:.0f}]</span></td>')
+        rows.append(f'<tr{" class=total" if name == "all" else ""}><th>{esc(str(name))}</th>{"".join(tds)}</tr>')
+    return (f'<div class="tablewrap"><table class="matrix"><thead><tr><th>{esc(title)}</th>{head}</tr></thead>'
+            f'<tbody>{"".join(rows)}</tbody></table></div>')
+
+
+def families_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: RunSummary,
+                  planners: Sequence[str]) -> str:
+    """Per scene family and per problem kind: success at a glance, every metric one click away."""
+    out = [inline_md("Problems solved / distinct problems (rate), 95% Wilson interval below.")]
     if len({r["variant"] for r in records}) > 1:
-        out.append(table(*group_rows(summary.by_family, key="variant"), cls="grouped", stacked=True))
+        out += [success_matrix(summary.by_family, summary.overall, key="variant", planners=planners, title="family"),
+                '<details><summary>Every metric per planner and family</summary>',
+                table(*group_rows(summary.by_family, key="variant"), cls="grouped", stacked=True), "</details>"]
     out += [figures(run_dir, "families"), "<h3>Per problem kind</h3>",
-            table(*group_rows(summary.by_kind, key="problem"), cls="grouped", stacked=True)]
+            success_matrix(summary.by_kind, summary.overall, key="problem", planners=planners, title="kind"),
+            '<details><summary>Every metric per planner and kind</summary>',
+            table(*group_rows(summary.by_kind, key="problem"), cls="grouped", stacked=True), "</details>"]
     return "".join(out)
 
 
@@ -164,7 +205,7 @@ def failures_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: Run
         "<h3>By stated reason (trials)</h3>",
         inline_md("What each failed trial's planner said (numbers in the text shown as #, so one cause is one "
                   "row). Filter the problem table below by planner and status to see the problems."),
-        table(headers, rows) if rows else "<p>No trial failed.</p>",
+        table(headers, [[*r[:2], *(c or "" for c in r[2:])] for r in rows]) if rows else "<p>No trial failed.</p>",
         figures(run_dir, "failures"),
     ])
 
