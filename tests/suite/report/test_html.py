@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from synthetic_runs import synthetic_records, write_dataset_run, write_run
 
+from scenes.errors import SuiteError
 from scenes.robot_model import load_robot
 from suite.cli import main
 from suite.report.html import REPORT_FILE, write_html
@@ -146,3 +147,18 @@ def test_report_command_and_its_errors(run, tmp_path, capsys):
     assert main(["report", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "holds no trials.jsonl" in err[0]
+
+
+def test_replay_of_one_problem(dataset_run, tmp_path):
+    from suite.report.replay import write_replay
+
+    run_dir, ds, _ = dataset_run
+    pid = ds.ids[0]
+    replay = write_replay(run_dir, pid[:8], out=tmp_path / "r.html")  # a unique prefix will do
+    start, end = replay.schedule["ref"]
+    assert start == 0.0 and end > 0.1
+    assert replay.schedule["stuck"] == "no path (timeout)"
+    text = replay.path.read_text(encoding="utf-8")
+    assert len(text) > 1_000_000 and "meshcat" in text  # its commands are embedded encoded
+    with pytest.raises(SuiteError, match="no problem 'nothing'"):
+        write_replay(run_dir, "nothing")
