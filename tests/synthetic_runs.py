@@ -164,3 +164,30 @@ def write_run(run_dir: Path, records: list[dict], *, planners=("ik", "rrt", "tra
         for r in records:
             f.write(json.dumps(r) + "\n")
     return run_dir
+
+
+def write_dataset_run(run_dir: Path, selection: str) -> tuple[Path, object]:
+    """A run in the runner's format on a real dataset's stored problems, without planning: planner
+    "ref" follows each problem's stored reference path, planner "stuck" times out on every problem
+    with a stated reason. Returns the run directory and the loaded dataset."""
+    from suite.problems.dataset import load_dataset
+
+    ds = load_dataset(selection)
+    records = []
+    for pid, p in zip(ds.ids, ds.problems):
+        base = {"scene_seed": p.scene.seed, "scene_key": p.scene.key(), "variant": p.scene.variant,
+                "family": p.scene.variant, "can_id": p.can_id, "problem": p.kind, "kind": p.kind, "problem_id": pid,
+                "held": p.held is not None, "q_start": p.q_start.tolist(), "q_goal": p.q_goal.tolist(),
+                "time_limit_s": 5.0, "planner_config": {}}
+        ref = ds.references[pid]
+        records.append({**base, "planner": "ref", "status": "success", "planning_time_s": 0.5, "path": ref.tolist(),
+                        "metrics": {"path_length_rad": path_length_rad(ref), "length_ratio": 1.0},
+                        "certification": {"verdict": "certified"}, "stats": {}})
+        records.append({**base, "planner": "stuck", "status": "timeout", "planning_time_s": 5.0, "path": None,
+                        "metrics": {}, "stats": {"reason": "time limit reached"}})
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "manifest.json").write_text(json.dumps({
+        "config": {"planners": ["ref", "stuck"], "dataset": selection},
+        "dataset": {"name": ds.name, "tier": ds.tier, "hash": ds.hash}}))
+    (run_dir / "trials.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    return run_dir, ds

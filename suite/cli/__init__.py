@@ -24,6 +24,8 @@ COMMANDS = {
     "dataset": ("suite.cli.dataset", "build, verify or show a frozen dataset of problems with reference solutions"),
     "tune": ("suite.cli.tune", "choose a planner's settings on a dataset's tuning split (planners/configs/NAME.yaml)"),
     "plot": ("suite.cli.plot", "redraw the plots and tables of a run from its trials.jsonl"),
+    "report": ("suite.cli.report", "write a run's self-contained one-page report (RUN/report.html)"),
+    "replay": ("suite.cli.replay", "write a 3-D replay (Meshcat, static HTML) of every planner's path of one problem"),
     "rescore": ("suite.cli.rescore", "recompute every metric of a run from its stored paths, then redraw its report"),
     "export": ("suite.cli.export", "write a dataset's problems as files any planner can read (problems, schema, URDFs)"),
     "import": ("suite.cli.import_", "judge an external planner's paths like a suite trial and add them as records"),

@@ -59,6 +59,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reperceive", action="store_true",
                    help="with --execute: closed loop, perceive and plan again after each pick")
     p.add_argument("--no-plots", action="store_true", help="skip drawing the plots")
+    p.add_argument("--no-html", action="store_true", help="skip writing report.html (the one-page report of the run)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -415,8 +416,12 @@ def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path) -> i
         _execute(trials, out, config, reperceive=args.reperceive, progress_bar=not args.no_progress)
     from suite.report.write import write_report
 
-    table = write_report(out, plots=not args.no_plots)
+    table = write_report(out, plots=not args.no_plots, html=not args.no_html)
     print(table)
+    if not args.no_html:
+        from suite.report.html import REPORT_FILE
+
+        print(f"\nreport: {out / REPORT_FILE}")
     print(f"\n{counts['ran']} trials run, {counts['skipped']} already recorded; "
           f"{time.perf_counter() - t0:.1f} s wall; results in {out}", file=sys.stderr)
     return 0

@@ -167,7 +167,7 @@ def run_execution(job: ExecutionJob) -> dict[str, Any]:
         provider, q_home = _open_loop(plan_cans(problems, job)), problems[0].q_start
     else:
         provider, q_home = _open_loop(job.cans), np.asarray(job.q_home, float)
-    meshcat = _meshcat(scene) if job.replay_path else None
+    meshcat = meshcat_for(scene) if job.replay_path else None
     outcome = execute_cycles(scene, provider, q_home=q_home, planner=job.planner, config=job.config,
                              meshcat=meshcat, cameras=job.reperceive and job.grasps == "perceived")
     record = outcome.to_json()
@@ -178,7 +178,8 @@ def run_execution(job: ExecutionJob) -> dict[str, Any]:
     return record
 
 
-def _meshcat(scene: Scene):
+def meshcat_for(scene: Scene):
+    """A Meshcat for a replay of `scene`, its camera looking at the work area."""
     from pydrake.geometry import Meshcat
 
     logging.getLogger("drake").setLevel(logging.WARNING)  # "Meshcat listening..." is not news here

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.patches import Circle, Polygon, Rectangle
+from matplotlib.patches import Polygon
 
 from suite.report.plots_common import planner_colors, plt, save_figure
 from suite.run.records import is_success, joint_path
@@ -57,62 +57,27 @@ def _recorded_scene(manifest: dict[str, Any], variant: str, scene_seed: int, sce
     return scene
 
 
-def _draw_box(ax, center, size, *, dims: tuple[int, int], **kw) -> None:
-    i, j = dims
-    ax.add_patch(Rectangle((center[i] - size[i] / 2, center[j] - size[j] / 2), size[i], size[j], **kw))
-
-
-def _draw_outline(ax, obstacle, *, dims: tuple[int, int], **kw) -> None:
-    """An obstacle primitive at any pose, as the outline of its projection on world axes `dims`."""
-    from scipy.spatial import ConvexHull
-
-    s = obstacle.size_m
-    if obstacle.shape == "box":
-        pts = np.array([[x, y, z] for x in (-s[0] / 2, s[0] / 2) for y in (-s[1] / 2, s[1] / 2) for z in (-s[2] / 2, s[2] / 2)])
-    else:
-        r, half = s[0], (s[1] / 2 if obstacle.shape == "cylinder" else s[0])
-        a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
-        ring = np.column_stack([r * np.cos(a), r * np.sin(a)])
-        pts = np.vstack([np.column_stack([ring, np.full(len(a), z)]) for z in (-half, half)])
-    X = obstacle.pose()
-    p = (pts @ X[:3, :3].T + X[:3, 3])[:, list(dims)]
-    hull = p[ConvexHull(p).vertices]
-    ax.add_patch(Polygon(hull, closed=True, **kw))
+#: matplotlib style of each outline kind of `scene_outlines` (family obstacles hatched).
+OUTLINE_STYLES: dict[str, dict[str, Any]] = {
+    "plate": dict(facecolor="0.85", edgecolor="0.45"),
+    "bin": dict(facecolor=(0.1, 0.45, 0.2, 0.25), edgecolor=(0.1, 0.45, 0.2)),
+    "wall": dict(facecolor=(0.45, 0.47, 0.55, 0.45), edgecolor="0.3", hatch="//"),
+    "shelf": dict(facecolor=(0.45, 0.47, 0.55, 0.45), edgecolor="0.3", hatch="//"),
+    "obstacle": dict(facecolor=(0.45, 0.47, 0.55, 0.45), edgecolor="0.3", hatch="//"),
+    "distractor": dict(facecolor=(0.2, 0.35, 0.75, 0.35), edgecolor="0.3"),
+    "can": dict(facecolor=(0.85, 0.1, 0.1, 0.5), edgecolor="darkred"),
+}
 
 
 def _draw_scene(ax, spec, cans, *, dims: tuple[int, int]) -> None:
-    """Plate, bin, wall (and cans) projected on the plane of world axes `dims`."""
-    _draw_box(ax, spec.plate.center_m, spec.plate.size_m, dims=dims, facecolor="0.85", edgecolor="0.45", label="plate")
-    for k, box in enumerate(spec.bin.boxes().values()):
-        _draw_box(ax, box.center_m, box.size_m, dims=dims, facecolor=(0.1, 0.45, 0.2, 0.25),
-                  edgecolor=(0.1, 0.45, 0.2), label="bin" if k == 0 else None)
-    if spec.wall is not None:
-        _draw_box(ax, spec.wall.center_m, spec.wall.size_m, dims=dims, facecolor=(0.45, 0.47, 0.55, 0.45),
-                  edgecolor="0.3", hatch="//", label="wall")
+    """Plate, bin, walls, the family's obstacles and the cans projected on the plane of world axes `dims`."""
+    from suite.report.scene_outlines import scene_outlines
+
     labelled = set()
-    for o in spec.extra:  # a family's obstacles: walls, window frame, shelf, distractors
-        kind = o.name.split("_")[0]
-        label = {"wall": "wall", "shelf": "shelf", "distractor": "distractor"}.get(kind, o.name)
-        _draw_outline(ax, o, dims=dims, label=None if label in labelled else label,
-                      facecolor=(0.2, 0.35, 0.75, 0.35) if kind == "distractor" else (0.45, 0.47, 0.55, 0.45),
-                      edgecolor="0.3", hatch=None if kind == "distractor" else "//")
-        labelled.add(label)
-    r, h = spec.can.radius_m, spec.can.height_m
-    for k, can in enumerate(cans):
-        c = np.asarray(can.p_WC_m)
-        if dims == (0, 1) and not can.lying:
-            ax.add_patch(Circle(c[:2], r, facecolor=(0.85, 0.1, 0.1, 0.5), edgecolor="darkred",
-                                label="can" if k == 0 else None))
-        else:
-            # a lying can's outline: its axis along yaw, or an upright can seen from the side
-            if can.lying:
-                a = np.array([math.cos(can.axis_yaw_rad), math.sin(can.axis_yaw_rad), 0.0])
-                half = np.abs(a) * h / 2 + (1 - np.abs(a)) * r
-                half[2] = r
-            else:
-                half = np.array([r, r, h / 2])
-            _draw_box(ax, c, 2 * half, dims=dims, facecolor=(0.85, 0.1, 0.1, 0.5), edgecolor="darkred",
-                      label="can" if k == 0 else None)
+    for o in scene_outlines(spec, cans, dims=dims):
+        ax.add_patch(Polygon(o.xy_m, closed=True, label=None if o.label in labelled else o.label,
+                             **OUTLINE_STYLES[o.kind]))
+        labelled.add(o.label)
 
 
 def plot_gripper_paths(

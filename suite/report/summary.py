@@ -142,6 +142,8 @@ def write_summary(
     title: str | None = None,
     executions: Sequence[dict[str, Any]] = (),
     budget_records: Sequence[dict[str, Any]] = (),
+    summary: RunSummary | None = None,
+    pairs: Sequence[PairedComparison] | None = None,
 ) -> list[Path]:
     """Write summary.md, summary.json, summary.csv (per planner, per planner x kind, per planner x
     family) and paired.csv.
@@ -155,16 +157,19 @@ def write_summary(
         executions: the run's physics execution records (execution.json), if it was executed.
         budget_records: a run at several budgets: its records with their own planner names (adds
             the per-budget table; `records` then name each planner and budget apart).
+        summary, pairs: the records' `summarize_run` and `paired_comparisons` if the caller has them
+            (default: computed here).
 
     Returns:
         The written files.
     """
     run_dir = Path(run_dir)
     planners = list(planners) if planners is not None else planners_in(records)
-    pairs = paired_comparisons(records, rng=np.random.default_rng(seed), planners=planners)
+    if pairs is None:
+        pairs = paired_comparisons(records, rng=np.random.default_rng(seed), planners=planners)
     md_path, csv_path, paired_path = run_dir / "summary.md", run_dir / "summary.csv", run_dir / "paired.csv"
     json_path = run_dir / "summary.json"
-    summary = summarize_run(records, planners=planners)
+    summary = summary or summarize_run(records, planners=planners)
     md = summary_markdown(records, pairs=pairs, planners=planners, title=title or f"Run summary: {run_dir.name}",
                           summary=summary)
     if budget_records:

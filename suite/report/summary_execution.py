@@ -25,6 +25,13 @@ time until the last can was in the bin. Real-time factor: simulated / wall time 
 
 def execution_table(executions: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None,
                     tablefmt: str = "github") -> str:
+    """Per planner: where the cans ended after physics execution, contacts, tracking and time
+    (`execution_rows` as a table)."""
+    return tabulate(*reversed(execution_rows(executions, planners=planners)), tablefmt=tablefmt)
+
+
+def execution_rows(executions: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
+                   ) -> tuple[list[str], list[list[Any]]]:
     """Per planner: where the cans ended after physics execution, contacts, tracking and time.
 
     "fully planned" counts the scenes whose every problem was planned, and the cans recycled in
@@ -59,4 +66,4 @@ def execution_table(executions: Sequence[dict[str, Any]], *, planners: Sequence[
             format_number(float(np.median([e["real_time_factor"] for e in ok]))) if ok else "-",
             len(runs) - len(ok),
         ])
-    return tabulate(rows, headers=headers, tablefmt=tablefmt)
+    return headers, rows

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -55,7 +56,7 @@ def _rate(g: GroupSummary) -> str:
     return f"{_count(g.successes)}/{g.n} ({100 * g.success_rate:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}])"
 
 
-def _rows(groups: Sequence[GroupSummary], *, key: str | None) -> tuple[list[str], list[list[str]]]:
+def group_rows(groups: Sequence[GroupSummary], *, key: str | None) -> tuple[list[str], list[list[str]]]:
     headers = (["planner"] + ([{"variant": "family"}.get(key, key)] if key else []) + ["success (95% CI)", TIME_TO_SOLVE_LABEL]
                + list(SUMMARY_METRICS.values()))
     rows = []
@@ -65,7 +66,7 @@ def _rows(groups: Sequence[GroupSummary], *, key: str | None) -> tuple[list[str]
     return headers, rows
 
 
-def _common_rows(stats: dict[str, dict[str, MetricStats]], planners: Sequence[str]) -> tuple[list[str], list[list[str]]]:
+def common_rows(stats: dict[str, dict[str, MetricStats]], planners: Sequence[str]) -> tuple[list[str], list[list[str]]]:
     headers = ["metric (common subset)", "n"] + list(planners)
     rows = []
     for m, label in SUMMARY_METRICS.items():
@@ -80,7 +81,7 @@ def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] 
     if not records:
         return "no trial records"
     groups = summarize(records, planners=planners)
-    headers, rows = _rows(groups, key=None)
+    headers, rows = group_rows(groups, key=None)
     return (tabulate(rows, headers=headers, tablefmt="simple") + "\n" + composition(records) + "\n"
             + certification_line(records, [g.planner for g in groups]))
 
@@ -122,7 +123,7 @@ def certification_counts(records: Sequence[dict[str, Any]], planner: str) -> dic
     return out
 
 
-def _certification_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def certification_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     headers = ["planner", "successes (0.01 rad)", *VERDICTS, "not checked"]
     rows = []
     for p in planners:
@@ -149,7 +150,7 @@ def cold_start(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any
             "setup_time_s": {"cold": med(cold, "setup_time_s"), "warm": med(warm, "setup_time_s")}}
 
 
-def _cold_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def cold_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     headers = ["planner", "cold trials", "planning time, cold (s)", "planning time, warm (s)", "setup, cold (s)",
                "setup, warm (s)"]
     rows = []
@@ -177,7 +178,7 @@ def attribution_summary(records: Sequence[dict[str, Any]], planner: str) -> dict
             "query_share": float(np.median([a["query_share"] for a in att]))}
 
 
-def _attribution_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def attribution_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     headers = ["planner", "engine", "trials", "collision queries", "us per query", "share of planning time"]
     rows = []
     for p in planners:
@@ -213,7 +214,7 @@ CERTIFICATION_INTRO = (
     "collides), `unproved` (a segment shorter than 1e-6 rad still unproved: a graze within micrometres).")
 
 
-def _failure_rows(groups: Sequence[GroupSummary], statuses: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def failure_rows(groups: Sequence[GroupSummary], statuses: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     failures = [s for s in statuses if s != SUCCESS]
     headers = ["planner", "trials", "failed"] + failures
     rows = [
@@ -222,7 +223,37 @@ def _failure_rows(groups: Sequence[GroupSummary], statuses: Sequence[str]) -> tu
     return headers, rows
 
 
-def _paired_rows(pairs: Sequence[PairedComparison]) -> tuple[list[str], list[list[Any]]]:
+def failure_reason(rec: dict[str, Any]) -> str | None:
+    """A trial's stated reason for its status: the record's own `reason` where it has one, else its
+    planner's (`stats.reason`, or the error of a crashed trial); None if it states none."""
+    stats = rec.get("stats") or {}
+    for value in (rec.get("reason"), stats.get("reason"), stats.get("error")):
+        if isinstance(value, str) and value.strip():
+            return value.strip()
+    return None
+
+
+#: Numbers in a reason ("knot 24 (t=30)", "5.39 s into a 5 s budget"): masked so that one cause is one row.
+_NUMBER = re.compile(r"(?<![A-Za-z_])-?\d+(?:\.\d+)?(?:e-?\d+)?")
+
+
+def failure_reason_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+    """Failed trials by status and stated reason (numbers in the reason shown as #), one column per
+    planner, the most frequent first."""
+    counts: dict[tuple[str, str], dict[str, int]] = {}
+    for r in records:
+        if r.get("status") == SUCCESS:
+            continue
+        reason = failure_reason(r)
+        key = (str(r["status"]), _NUMBER.sub("#", reason) if reason else "(no reason recorded)")
+        row = counts.setdefault(key, {})
+        row[r["planner"]] = row.get(r["planner"], 0) + 1
+    headers = ["status", "reason", *planners]
+    ordered = sorted(counts.items(), key=lambda kv: (-sum(kv[1].values()), kv[0]))
+    return headers, [[status, reason, *(c.get(p, 0) for p in planners)] for (status, reason), c in ordered]
+
+
+def paired_rows(pairs: Sequence[PairedComparison]) -> tuple[list[str], list[list[Any]]]:
     headers = ["metric", "A - B", "problems", "scenes", "median diff", "95% CI", "Wilcoxon p", "note"]
     rows = []
     for c in pairs:
@@ -262,28 +293,28 @@ def summary_markdown(
         "## Per planner",
         "",
     ]
-    md.append(tabulate(*reversed(_rows(summary.overall, key=None)), tablefmt="github"))
+    md.append(tabulate(*reversed(group_rows(summary.overall, key=None)), tablefmt="github"))
     if len(planners) > 1:
         md += ["", "## On the problems every planner solved", "",
                "Medians over the distinct problems that every planner solved (n of them per metric): "
                "no planner is flattered by skipping the hard ones.", ""]
-        md.append(tabulate(*reversed(_common_rows(summary.common, planners)), tablefmt="github"))
+        md.append(tabulate(*reversed(common_rows(summary.common, planners)), tablefmt="github"))
     md += ["", "## Certified paths (successful trials)", "", CERTIFICATION_INTRO, ""]
-    md.append(tabulate(*reversed(_certification_rows(records, planners)), tablefmt="github"))
+    md.append(tabulate(*reversed(certification_rows(records, planners)), tablefmt="github"))
     if any(r.get("attribution") for r in records):
         md += ["", "## Where planning time goes", "", ATTRIBUTION_INTRO, ""]
-        md.append(tabulate(*reversed(_attribution_rows(records, planners)), tablefmt="github"))
+        md.append(tabulate(*reversed(attribution_rows(records, planners)), tablefmt="github"))
     if any("warm" in r for r in records):
         md += ["", "## Cold starts", "", COLD_INTRO, ""]
-        md.append(tabulate(*reversed(_cold_rows(records, planners)), tablefmt="github"))
+        md.append(tabulate(*reversed(cold_rows(records, planners)), tablefmt="github"))
     md += ["", "## Failures by status (trials)", ""]
-    md.append(tabulate(*reversed(_failure_rows(summary.overall, statuses_in(records))), tablefmt="github"))
+    md.append(tabulate(*reversed(failure_rows(summary.overall, statuses_in(records))), tablefmt="github"))
     md += ["", "## Per planner and problem kind", ""]
-    md.append(tabulate(*reversed(_rows(summary.by_kind, key="problem")), tablefmt="github"))
+    md.append(tabulate(*reversed(group_rows(summary.by_kind, key="problem")), tablefmt="github"))
     if len({r["variant"] for r in records}) > 1:
         md += ["", "## Per planner and scene family", ""]
         md.append(
-            tabulate(*reversed(_rows(summary.by_family, key="variant")), tablefmt="github")
+            tabulate(*reversed(group_rows(summary.by_family, key="variant")), tablefmt="github")
         )
     md += [
         "",
@@ -295,5 +326,5 @@ def summary_markdown(
         "problems as independent, so read it beside the CI). Negative means A is lower.",
         "",
     ]
-    md.append(tabulate(*reversed(_paired_rows(pairs)), tablefmt="github") if pairs else "(fewer than two planners)")
+    md.append(tabulate(*reversed(paired_rows(pairs)), tablefmt="github") if pairs else "(fewer than two planners)")
     return "\n".join(md) + "\n"

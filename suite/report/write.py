@@ -11,12 +11,14 @@ from suite.run.records import TRIALS_FILE
 log = logging.getLogger(__name__)
 
 
-def write_report(run_dir: str | Path, *, plots: bool = True, seed: int = 0) -> str:
-    """Write summary.md/.csv, paired.csv, the OMPL benchmark logs (arena/) and the plots (plots/).
+def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, seed: int = 0) -> str:
+    """Write summary.md/.csv, paired.csv, the OMPL benchmark logs (arena/), the plots (plots/) and
+    report.html (which inlines those plots, so it is written last).
 
     Args:
         run_dir: the run directory (trials.jsonl, optionally manifest.json).
         plots: also draw the PNG figures (the slowest part, a few seconds).
+        html: also write report.html (`suite.report.html`).
         seed: seeds the bootstrap generator of the paired comparisons.
 
     Returns:
@@ -44,14 +46,25 @@ def write_report(run_dir: str | Path, *, plots: bool = True, seed: int = 0) -> s
     from suite.execution.jobs import read_execution
     from suite.report.summary_execution import execution_table
 
+    import numpy as np
+
+    from suite.report.summary_stats import paired_comparisons, summarize_run
+
     executions = read_execution(run_dir)
+    summary = summarize_run(records, planners=planners)
+    pairs = paired_comparisons(records, rng=np.random.default_rng(seed), planners=planners)
     written = write_summary(run_dir, records, planners=planners, seed=seed, executions=executions,
-                            budget_records=budget_records)
+                            budget_records=budget_records, summary=summary, pairs=pairs)
     written += write_arena_logs(run_dir, records=records)
     if plots:
         from suite.report.plots import make_plots
 
         written += make_plots(run_dir, records=records, executions=executions, budget_records=budget_records)
+    if html:
+        from suite.report.html import write_html
+
+        written.append(write_html(run_dir, records=records, planners=planners, summary=summary, pairs=pairs,
+                                  executions=executions))
     log.debug("wrote %s", ", ".join(str(p) for p in written))
     table = summary_table(records, planners=planners)
     if executions:

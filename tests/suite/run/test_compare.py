@@ -61,6 +61,10 @@ def test_tiny_run_end_to_end(tiny_run):
     assert manifest["machine"]["cores"] >= 1
     assert (out / "summary.md").exists() and (out / "summary.csv").exists()
     assert "rrt" in res.stdout and "5/5" in res.stdout
+    # the one-page report, by default, its path printed
+    assert f"report: {out / 'report.html'}" in res.stdout
+    page = (out / "report.html").read_text()
+    assert page.count('<section class="drill" ') == len({r["problem_id"] for r in recs}) == 5
 
 
 def test_jobs_do_not_change_the_records(tiny_run, tmp_path):
