@@ -1,4 +1,4 @@
-"""`python -m suite dataset build|verify|show|recertify`: frozen datasets of problems with reference solutions."""
+"""`python -m suite dataset build|verify|show|recertify|rewitness`: frozen datasets of problems with reference solutions."""
 
 from __future__ import annotations
 
@@ -33,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="AORRTC budget per reference planned again (default 10)")
     r.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
     r.add_argument("--no-progress", action="store_true", help="no progress output")
+    w = sub.add_parser("rewitness", help="apply the witness rule (at least 0.1 mm of clearance) to a dataset "
+                                         "built before it, in place (not for a shipped dataset)")
+    w.add_argument("name", help="dataset name")
     s = sub.add_parser("show", help="print a dataset's composition")
     s.add_argument("name", help="dataset name, optionally NAME:TIER")
     s.add_argument("--json", action="store_true", help="print it as JSON")
@@ -40,7 +43,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    return {"build": _build, "verify": _verify, "show": _show, "recertify": _recertify}[args.action](args)
+    return {"build": _build, "verify": _verify, "show": _show, "recertify": _recertify,
+            "rewitness": _rewitness}[args.action](args)
+
+
+def _rewitness(args: argparse.Namespace) -> int:
+    from suite.problems.dataset import dataset_dir, read_manifest
+    from suite.run.rewitness_dataset import rewitness_dataset
+
+    read_manifest(dataset_dir(args.name))  # an unknown dataset fails before any work
+    m = rewitness_dataset(args.name, argv=sys.argv[1:])
+    r = m["rewitnessed"]
+    print(f"dataset {m['name']} ({m['hash']}, was {r['hash_before']}): {len(r['replaced'])} witnesses replaced by "
+          f"ones with at least {r['min_clearance_m']} m of clearance, {len(r['dropped'])} problems left the benchmark "
+          f"(no witness found with it); witness clearance now {m['witness_clearance_m']}")
+    return 0
 
 
 def _recertify(args: argparse.Namespace) -> int:

@@ -42,7 +42,7 @@ from suite.problems.dataset import (
     scene_record,
 )
 from suite.problems.identity import problem_id, straight_line
-from suite.run.witnesses import choose_witness
+from suite.run.witnesses import MIN_WITNESS_CLEARANCE_M, choose_witness, witness_with_margin
 
 log = logging.getLogger(__name__)
 
@@ -360,7 +360,7 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
     keyed = [(pid, (p, m)) for pid, p, m in items]
     refs = _references(keyed, settings, progress_bar=progress_bar)
     t_refs = time.perf_counter() - t0 - t_collect
-    solved, unsolved = [], []
+    solved, unsolved, no_margin = [], [], []
     for pid, (p, m) in keyed:
         if m["trivial"] and m.get("straight_certified", True):
             # no path is shorter; stored with the exact stored configurations at its ends
@@ -371,7 +371,11 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
         if ref is None:
             unsolved.append(pid)
             continue
-        m = {**m, "witness": choose_witness(p, ref, refs.get(pid, {}).get("witness"))}  # suite.run.witnesses
+        witness, _ = witness_with_margin(p, choose_witness(p, ref, refs.get(pid, {}).get("witness")))
+        if not m["trivial"] and witness["clearance_min_m"] < MIN_WITNESS_CLEARANCE_M:
+            no_margin.append(pid)  # known solvable only to a checker's tolerance (suite.run.witnesses)
+            continue
+        m = {**m, "witness": witness}
         solved.append((pid, (p, {**m, "reference": {k: ref[k] for k in ("path", "planner", "config", "time_s")},
                                  "reference_length_rad": float(np.sum(np.linalg.norm(np.diff(np.asarray(ref["path"]), axis=0), axis=1)))})))
     chosen = _select(solved, settings)
@@ -410,6 +414,7 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
                    "trivial": sum(r["trivial"] and r["benchmark"] for r in records),
                    "cycle_steps_stored": sum(not r["benchmark"] for r in records),
                    "candidates": len(items), "unsolved_dropped": len(unsolved),
+                   "no_margin_dropped": len(no_margin),
                    "trivial_dropped": len(solved) - len(chosen)},
         "references_certified": True,
         "witness_clearance_m": _clearance_summary([r["witness"]["clearance_min_m"] for r in records

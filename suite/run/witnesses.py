@@ -16,9 +16,16 @@ import numpy as np
 
 #: A witness with at least this clearance from the scene is kept at once (m).
 WITNESS_CLEARANCE_GOAL_M = 1e-3
+#: No stored witness keeps less than this from the scene (m): a problem whose every known path
+#: passes closer is "solvable" only to a checker's tolerance, and is left out of a dataset.
+MIN_WITNESS_CLEARANCE_M = 1e-4
+#: Paddings (m) of the second, finer search for a problem whose witness is under the minimum, with
+#: a longer budget (FINE_BUDGET_S per padding): narrow passages that 3 and 1.5 mm close.
+FINE_PADDINGS_M = (8e-4, 4e-4, 2e-4)
+FINE_BUDGET_S = 10.0
 
 
-def witness_search(problem, paddings: tuple[float, ...], tried: list) -> dict[str, Any] | None:
+def witness_search(problem, paddings: tuple[float, ...], tried: list, *, budget_s: float = 5.0) -> dict[str, Any] | None:
     """A witness path with a margin from the obstacles: planned by RRT-Connect (shortened) in the
     problem's world with every obstacle grown by each padding in turn (`planners.worlds.
     padded_worlds`), then validated and certified in the true world and its clearance measured;
@@ -43,10 +50,10 @@ def witness_search(problem, paddings: tuple[float, ...], tried: list) -> dict[st
             if not (padded.is_free(problem.q_start) and padded.is_free(problem.q_goal)):
                 tried.append({"planner": "rrt", "padding_m": pad, "status": "ends within the padding"})
                 continue
-            cfg = {"simplifier": "rope+full", "simplify_time_s": 0.5}
+            cfg = {"simplifier": "rope+full", "simplify_time_s": 0.5}  # searched as RRT-Connect, shortened
             t0 = time.perf_counter()
             result = make_planner("rrt", make_config(planner_class("rrt"), cfg)).plan(
-                problem.with_(time_limit_s=5.0, seed=200 + int(round(pad * 1e4))))
+                problem.with_(time_limit_s=budget_s, seed=200 + int(round(pad * 1e4))))
             elapsed = round(time.perf_counter() - t0, 3)
         if result.path is None:
             tried.append({"planner": "rrt", "padding_m": pad, "status": result.status.value, "time_s": elapsed})
@@ -77,3 +84,16 @@ def choose_witness(problem, reference: dict, margin: dict | None) -> dict[str, A
     if margin is not None and margin["clearance_min_m"] > own["clearance_min_m"]:
         return {k: margin[k] for k in ("path", "planner", "padding_m", "clearance_min_m")}
     return own
+
+
+def witness_with_margin(problem, witness: dict[str, Any]) -> tuple[dict[str, Any], list]:
+    """`witness` if it keeps MIN_WITNESS_CLEARANCE_M from the scene, else the better of it and a
+    finer search (FINE_PADDINGS_M, FINE_BUDGET_S); with the finer search's attempts. The result
+    may still be under the minimum (the caller leaves such a problem out)."""
+    if witness["clearance_min_m"] >= MIN_WITNESS_CLEARANCE_M:
+        return witness, []
+    tried: list = []
+    fine = witness_search(problem, FINE_PADDINGS_M, tried, budget_s=FINE_BUDGET_S)
+    if fine is not None and fine["clearance_min_m"] > witness["clearance_min_m"]:
+        return {k: fine[k] for k in ("path", "planner", "padding_m", "clearance_min_m")}, tried
+    return witness, tried

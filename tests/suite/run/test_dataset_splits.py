@@ -68,3 +68,31 @@ def test_on_the_shipped_composition_the_new_rules_hold_where_the_old_broke():
     old_quick = set(json.loads((d / "manifest.json").read_text())["tiers"]["quick"])
     old = [s for s in scenes if any(r["problem_id"] in old_quick for r in records if r["scene_key"] == s.key)]
     assert any("window holds 21 of 74" in v for v in tier_violations(old, [s for s in scenes if s.key not in old_tune]))
+
+
+def test_the_default_dataset_ships_its_rules_read_from_its_files():
+    """The default dataset, read from its files alone: the stratified split (no scene on both sides),
+    the balanced quick tier of whole test scenes with 70% non-trivial problems, and witnesses with a
+    margin (95% at 1 mm or more, none under 0.1 mm)."""
+    from suite.problems import DEFAULT_DATASET
+
+    d = dataset_dir(DEFAULT_DATASET)
+    records = [json.loads(line) for line in (d / "problems.jsonl").read_text().splitlines()]
+    bench = [r for r in records if r.get("benchmark", True)]
+    sides = {}
+    for r in bench:
+        sides.setdefault(r["scene_key"], set()).add(r["split"])
+    assert all(len(s) == 1 for s in sides.values())
+    scenes = scene_counts(bench)
+    tune = {k for k, s in sides.items() if s == {"tune"}}
+    assert split_violations(scenes, tune) == []
+    quick = set(json.loads((d / "manifest.json").read_text())["tiers"]["quick"])
+    in_quick = {r["scene_key"] for r in bench if r["problem_id"] in quick}
+    assert all(r["problem_id"] in quick for r in bench if r["scene_key"] in in_quick)  # whole scenes
+    assert in_quick.isdisjoint(tune)
+    tier = [s for s in scenes if s.key in in_quick]
+    assert tier_violations(tier, [s for s in scenes if s.key not in tune]) == []
+    quick_recs = [r for r in bench if r["problem_id"] in quick]
+    assert sum(not r["trivial"] for r in quick_recs) >= 0.7 * len(quick_recs)
+    clear = np.array([r["witness"]["clearance_min_m"] for r in bench if not r["trivial"]])
+    assert clear.min() >= 1e-4 and np.mean(clear >= 1e-3) >= 0.95
