@@ -210,7 +210,7 @@ def attribute(stats: dict[str, Any], planning_time_s: float,
     between knots, `trajopt` and `gcs` on their results); without it, the planner's own
     `stats.collision_checks` / `stats.collision_query_s`. `stats.drake_distance_queries` /
     `stats.drake_distance_query_s` are the distance queries SNOPT made through Drake's constraint
-    (`ik`, `trajopt`: counted exactly, timed by calibration; `planners.drake_queries`).
+    (`ik`, `trajopt`: counted exactly, timed by replaying a sample of them; `planners.drake_queries`).
 
     Returns {engine, queries, query_s, s_per_query, other_s, query_share, parts: {engine: {queries,
     query_s, timing}}}, or None when nothing was counted.
