@@ -126,7 +126,7 @@ def build_roboplan_world(world, *, robot: RobotModel | None = None) -> RoboplanW
     bodies = (*robot.body_names, *([HELD_CAN] if held is not None else ()))
     obstacles = []
     for name, obj in world.obstacles:
-        shape, size, X = _obstacle_primitive(world, name)
+        shape, size, X = obstacle_primitive(world, name)
         if world.padding_m:
             size = grown_dims(shape, size, world.padding_m)
         _add(scene, name, shape, size, X)
@@ -136,7 +136,7 @@ def build_roboplan_world(world, *, robot: RobotModel | None = None) -> RoboplanW
     return RoboplanWorld(scene, urdf, obstacles, bodies, allowed)
 
 
-def _obstacle_primitive(world, name: str) -> tuple[str, tuple, np.ndarray]:
+def obstacle_primitive(world, name: str) -> tuple[str, tuple, np.ndarray]:
     """An obstacle of the world as (shape, size, X_WO), from the scene spec (as the world built it)."""
     spec = world.scene.spec
     for o in spec.obstacles():
