@@ -100,10 +100,35 @@ def _time_loop(check, Q) -> tuple[np.ndarray, float]:
     return out, time.perf_counter() - t
 
 
+def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> float:
+    """The exact distance between segments p1-q1 and p2-q2 (Ericson, Real-Time Collision
+    Detection, 5.1.9): the reference for a capsule pair (minus both radii)."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e, f, c, b = d1 @ d1, d2 @ d2, d2 @ r, d1 @ r, d1 @ d2
+    den = a * e - b * b
+    s = float(np.clip((b * f - c * e) / den, 0.0, 1.0)) if den > 1e-15 else 0.0
+    t = (b * s + f) / e
+    if t < 0:
+        t, s = 0.0, float(np.clip(-c / a, 0.0, 1.0))
+    elif t > 1:
+        t, s = 1.0, float(np.clip((b - c) / a, 0.0, 1.0))
+    return float(np.linalg.norm(p1 + d1 * s - (p2 + d2 * t)))
+
+
+def _capsule_exact(meter, pair, poses) -> float:
+    ends, radii = [], []
+    for name in pair:
+        _kind, (r, length), _ = meter.items[name]
+        X = poses[name]
+        ends += [X[:3, 3] - X[:3, 2] * length / 2, X[:3, 3] + X[:3, 2] * length / 2]
+        radii.append(r)
+    return segment_distance(*ends) - sum(radii)
+
+
 def _pose_and_distance_checks(world, rw, meter, Q) -> dict:
     """Max pose error of roboplan's kinematics against the suite's, and the signed distances of
     both libraries for every counted pair within NEAR_PAIR_M."""
-    max_dp, max_dR, diffs = 0.0, 0.0, []
+    max_dp, max_dR, diffs, capsule_err = 0.0, 0.0, [], []
     for q in Q:
         X_suite = world.robot.link_poses(q)
         for i, frame in enumerate(POSE_FRAMES):
@@ -115,6 +140,9 @@ def _pose_and_distance_checks(world, rw, meter, Q) -> dict:
             m = meter.measure(q, pair, poses)
             if min(m.fcl_distance_m, m.coal_distance_m) < NEAR_PAIR_M:
                 diffs.append((m.fcl_distance_m, m.coal_distance_m, m.shapes))
+                if m.shapes == "capsule-capsule" and m.fcl_distance_m > 1e-6:
+                    exact = _capsule_exact(meter, pair, poses)
+                    capsule_err.append((abs(m.fcl_distance_m - exact), abs(m.coal_distance_m - exact)))
     d = np.array([(a, b) for a, b, _ in diffs]) if diffs else np.zeros((0, 2))
     apart = d[:, 0] > 1e-6 if len(d) else np.zeros(0, bool)
     by_shapes: dict[str, float] = collections.defaultdict(float)
@@ -129,6 +157,9 @@ def _pose_and_distance_checks(world, rw, meter, Q) -> dict:
         "penetrating_pairs": int((~apart).sum()),
         "penetrating_max_abs_diff_m": float(np.max(np.abs(d[~apart, 0] - d[~apart, 1]))) if (~apart).any() else None,
         "apart_max_abs_diff_by_shapes_m": dict(by_shapes),
+        "capsule_pairs": len(capsule_err),
+        "capsule_fcl_max_error_m": max((a for a, _ in capsule_err), default=None),
+        "capsule_coal_max_error_m": max((b for _, b in capsule_err), default=None),
     }
 
 
@@ -221,7 +252,9 @@ def _merge_pose(parts: list[dict]) -> dict:
     return {"pose_max_translation_m": mx("pose_max_translation_m"), "pose_max_rotation_entry": mx("pose_max_rotation_entry"),
             "near_pairs": sum(p["near_pairs"] for p in parts), "apart_pairs": sum(p["apart_pairs"] for p in parts),
             "apart_max_abs_diff_m": mx("apart_max_abs_diff_m"), "penetrating_pairs": sum(p["penetrating_pairs"] for p in parts),
-            "penetrating_max_abs_diff_m": mx("penetrating_max_abs_diff_m"), "apart_max_abs_diff_by_shapes_m": shapes}
+            "penetrating_max_abs_diff_m": mx("penetrating_max_abs_diff_m"), "apart_max_abs_diff_by_shapes_m": shapes,
+            "capsule_pairs": sum(p["capsule_pairs"] for p in parts), "capsule_fcl_max_error_m": mx("capsule_fcl_max_error_m"),
+            "capsule_coal_max_error_m": mx("capsule_coal_max_error_m")}
 
 
 def _fmt_m(v) -> str:
@@ -292,7 +325,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {r['family']}: pose error max {_fmt_m(m['pose_max_translation_m'])} m / {_fmt_m(m['pose_max_rotation_entry'])} "
               f"(rotation entry); {m['apart_pairs']} apart pairs, max |fcl - coal| {_fmt_m(m['apart_max_abs_diff_m'])} m "
               f"(largest for {worst[0]}); {m['penetrating_pairs']} penetrating pairs, max |fcl - coal| "
-              f"{_fmt_m(m['penetrating_max_abs_diff_m'])} m")
+              f"{_fmt_m(m['penetrating_max_abs_diff_m'])} m; against the exact distance of {m['capsule_pairs']} apart "
+              f"capsule pairs: python-fcl off by up to {_fmt_m(m['capsule_fcl_max_error_m'])} m, coal by "
+              f"{_fmt_m(m['capsule_coal_max_error_m'])} m")
     sweep = None
     if args.self_sweep > 0:
         sweep = self_pair_sweep(ds, args.self_sweep)
