@@ -100,10 +100,10 @@ class RoboplanRRTConfig:
 def roboplan_world(problem: PlanningProblem) -> tuple[RoboplanWorld, float]:
     """roboplan's scene of the problem's world (cached per process) and the measured cost of one
     of its state checks (s), from `CALIBRATION_CHECKS` configurations uniform in the limits."""
-    key = problem.world_key()
+    world = collision_world(problem)
+    key = (problem.world_key(), world.padding_m)
     hit = _SCENES.get(key)
     if hit is None:
-        world = collision_world(problem)
         rw = build_roboplan_world(world)
         Q = world.robot.random_configurations(np.random.default_rng(0), CALIBRATION_CHECKS)
         has = rw.scene.hasCollisions
@@ -117,12 +117,13 @@ def roboplan_world(problem: PlanningProblem) -> tuple[RoboplanWorld, float]:
 def edge_checks(nodes, step_rad: float) -> int:
     """State checks of the edges kept in a tree: ceil(length / step) samples per edge (the
     checked samples of an edge at most `step_rad` apart, its end included)."""
-    n = 0
-    for node in nodes:
-        if node.parent_id >= 0:
-            d = float(np.linalg.norm(np.asarray(node.config) - np.asarray(nodes[node.parent_id].config)))
-            n += max(1, math.ceil(d / step_rad))
-    return n
+    if not nodes:
+        return 0
+    C = np.array([n.config for n in nodes], float)
+    parent = np.array([n.parent_id for n in nodes])
+    child = parent >= 0
+    d = np.linalg.norm(C[child] - C[parent[child]], axis=1)
+    return int(np.maximum(1, np.ceil(d / step_rad)).sum())
 
 
 class RoboplanRRTPlanner:
@@ -191,10 +192,12 @@ class RoboplanRRTPlanner:
         except RuntimeError as exc:
             path, error = None, str(exc)
         stats["solve_time_s"] = time.perf_counter() - t_solve
+        t_count = time.perf_counter()
         trees = rrt.getNodes()
         stats["graph_vertices"] = sum(len(t) for t in trees)
         checks = sum(edge_checks(t, cfg.collision_check_step_rad) for t in trees)
-        stats.update(roboplan_checks_min=checks, roboplan_check_s=check_s, roboplan_query_s_min=checks * check_s)
+        stats.update(roboplan_checks_min=checks, roboplan_check_s=check_s, roboplan_query_s_min=checks * check_s,
+                     count_time_s=time.perf_counter() - t_count)  # this bookkeeping, inside the clock
         if path is None:
             stats["reason"] = error
             if TIMEOUT_MESSAGE in error:
