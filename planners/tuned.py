@@ -31,7 +31,7 @@ SEARCH_SPACES: dict[str, dict[str, tuple]] = {
     # None: OMPL's own range (a fifth of the space's extent, about 2.8 rad here), and steps around it
     "rrt": {"range_rad": (None, 2.0, 1.0, 0.5), "simplifier": ("rope", "rope+full")},
     # roboplan's own max connection distance (3.0) first, steps around it, and rrt's 1.0; always
-    # shortcut, as rrt always simplifies (unshortcut paths are faster to return, 1.4 to 1.6 times
+    # shortcut, as rrt always simplifies (unshortcut paths return sooner but are 1.4 to 5.6 times
     # the reference length on the tune split, and the time objective alone would choose them)
     "roboplan-rrt": {"range_rad": (3.0, 2.0, 1.0, 0.5)},
     "rrtstar": {"range_rad": (None, 1.0, 0.5, 0.25), "goal_bias": (0.05, 0.2)},
