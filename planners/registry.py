@@ -1,6 +1,8 @@
 """Planner registry: an explicit table of built-in planners plus entry points.
 
-Built-ins are imported lazily (OMPL is not loaded to run `ik`). Third-party packages add planners
+Built-ins are imported lazily (OMPL is not loaded to run `ik`). A built-in that needs an optional
+extra (`OPTIONAL`) is named like any other; without its extra, naming it is a one-line SuiteError
+that names the extra, and nothing falls back to another planner. Third-party packages add planners
 with an entry point in the group `suite.planners`, e.g. in their pyproject.toml:
 
     [project.entry-points."suite.planners"]
@@ -10,6 +12,7 @@ with an entry point in the group `suite.planners`, e.g. in their pyproject.toml:
 from __future__ import annotations
 
 import importlib
+import importlib.util
 from importlib.metadata import entry_points
 
 from scenes.errors import SuiteError
@@ -23,6 +26,11 @@ BUILTIN = {
     "prm": "planners.ompl_rrt:PRMPlanner",
     "trajopt": "planners.trajopt:TrajoptPlanner",
     "gcs": "planners.gcs:GcsPlanner",
+    "roboplan-rrt": "planners.roboplan_rrt:RoboplanRRTPlanner",
+}
+#: Built-ins that need an optional extra: name -> (the module it needs, the extra that installs it).
+OPTIONAL = {
+    "roboplan-rrt": ("roboplan", "peers"),
 }
 ENTRY_POINT_GROUP = "suite.planners"
 
@@ -34,17 +42,37 @@ def known_planners() -> dict[str, str]:
     return table
 
 
+def _missing_extra(name: str) -> SuiteError:
+    extra = OPTIONAL[name][1]
+    return SuiteError(f"planner {name!r} needs the optional extra: pip install -e .[{extra}]")
+
+
+def check_available(name: str) -> None:
+    """Raise the one-line SuiteError naming the extra if `name` needs one that is not installed."""
+    if name in OPTIONAL and importlib.util.find_spec(OPTIONAL[name][0]) is None:
+        raise _missing_extra(name)
+
+
 def planner_class(name: str) -> type:
     """The planner class registered under `name`.
 
     Raises:
-        SuiteError: for an unknown name, listing the known ones.
+        SuiteError: for an unknown name, listing the known ones, or a built-in whose optional
+            extra is not installed, naming the extra.
     """
     table = known_planners()
     if name not in table:
         raise SuiteError(f"unknown planner {name!r}; known planners: {', '.join(sorted(table))}")
+    check_available(name)
     module, _, attr = table[name].partition(":")
-    return getattr(importlib.import_module(module), attr)
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        needed = OPTIONAL.get(name, (None,))[0]
+        if needed is not None and (exc.name or "").split(".")[0] == needed:
+            raise _missing_extra(name) from None
+        raise
+    return getattr(mod, attr)
 
 
 def parse_planner_list(text: str) -> list[str]:
@@ -56,6 +84,7 @@ def parse_planner_list(text: str) -> list[str]:
     for n in names:
         if n not in table:
             raise SuiteError(f"unknown planner {n!r}; known planners: {', '.join(sorted(table))}")
+        check_available(n)
     if len(set(names)) != len(names):
         raise SuiteError(f"--planners names a planner twice: {text!r}")
     return names

@@ -17,6 +17,7 @@ TARGETS = {
     "single-tree": "suite.bench.single_tree",
     "certify": "suite.bench.certify",
     "attribution": "suite.bench.attribution",
+    "agreement": "suite.bench.agreement",
 }
 
 

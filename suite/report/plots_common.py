@@ -29,6 +29,7 @@ BUILTIN_COLORS = {
     "aorrtc": "#8c564b",
     "prm": "#e377c2",
     "gcs": "#17becf",
+    "roboplan-rrt": "#00a087",
 }
 SPARE_COLORS = ("#bcbd22", "#7f7f7f", "#393b79", "#637939", "#843c39", "#7b4173")
 

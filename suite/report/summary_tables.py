@@ -196,7 +196,9 @@ ATTRIBUTION_INTRO = (
     "Medians over warm trials of what a planning time went to: the collision and distance queries the planner "
     "asked, and the rest (the planner's own work and the Python around it). python-fcl state checks (every "
     "planner's motion checks) are clocked around each call; the distance queries SNOPT makes through Drake's "
-    "constraint (`ik`, `trajopt`) are counted exactly and timed by replaying a sample of them (docs/timing.md).")
+    "constraint (`ik`, `trajopt`) are counted exactly and timed by replaying a sample of them (docs/timing.md); "
+    "roboplan's checks in C++ (`roboplan-rrt`), which it does not count, are a lower bound: the edges kept in its "
+    "trees at a calibrated cost per check (docs/peers.md).")
 
 
 COLD_INTRO = (

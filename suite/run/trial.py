@@ -211,6 +211,8 @@ def attribute(stats: dict[str, Any], planning_time_s: float,
     `stats.collision_checks` / `stats.collision_query_s`. `stats.drake_distance_queries` /
     `stats.drake_distance_query_s` are the distance queries SNOPT made through Drake's constraint
     (`ik`, `trajopt`: counted exactly, timed by replaying a sample of them; `planners.drake_queries`).
+    `stats.roboplan_checks_min` / `stats.roboplan_query_s_min` are `roboplan-rrt`'s state checks
+    in C++, which roboplan does not count: a lower bound (`planners.roboplan_rrt`).
 
     Returns {engine, queries, query_s, s_per_query, other_s, query_share, parts: {engine: {queries,
     query_s, timing}}}, or None when nothing was counted.
@@ -222,6 +224,11 @@ def attribute(stats: dict[str, Any], planning_time_s: float,
     dn, d_s = stats.get("drake_distance_queries"), stats.get("drake_distance_query_s")
     if isinstance(dn, int) and dn > 0 and isinstance(d_s, (int, float)):
         parts["drake"] = {"queries": dn, "query_s": float(d_s), "timing": "replayed"}
+    rn, r_s = stats.get("roboplan_checks_min"), stats.get("roboplan_query_s_min")
+    if isinstance(rn, int) and rn > 0 and isinstance(r_s, (int, float)):
+        # roboplan counts none of its checks: the edges kept in its trees, at a cost per check
+        # measured outside the clock (planners.roboplan_rrt): a lower bound
+        parts["roboplan"] = {"queries": rn, "query_s": float(r_s), "timing": "lower_bound"}
     if not parts or not planning_time_s > 0:
         return None
     n_all = sum(p["queries"] for p in parts.values())
