@@ -110,8 +110,9 @@ def test_open_and_wall_keep_their_scenes():
     # the fixed variants draw no station: same cans as before families existed (seed 3, wall)
     scene = generate_scene(load_spec(variant="wall"), seed=3, check_reachable=False)
     assert scene.key() == "09abb10890bacd9a"
-    # with the reachability check too (a can unreachable among the others is redrawn, as before)
-    assert generate_scene(load_spec(variant="open"), seed=0).key() == "2038a7ba1a3f5527"
+    # with the reachability check too (a can unreachable among the others is redrawn); the grasp
+    # checks' IK changed with recycle-v3 (one random restart, 60 iterations), and this seed with it
+    assert generate_scene(load_spec(variant="open"), seed=0).key() == "ddecab0c22573e88"
 
 
 @pytest.mark.parametrize("edit, field", [
