@@ -39,6 +39,7 @@ def test_a_warm_started_bin_goal_stays_on_the_previous_cycles_branch(wall_scene)
 
 
 def test_a_dataset_built_before_the_setting_is_posed_without_it():
-    assert pose_settings({"build": {"settings": {"name": "old"}}}) == {"bin_warm_start": False}
-    assert pose_settings({"build": {"settings": {"bin_warm_start": True}}}) == {"bin_warm_start": True}
-    assert BuildSettings(name="new").bin_warm_start  # new builds use it
+    assert pose_settings({"build": {"settings": {"name": "old"}}}) == {"bin_warm_start": False, "goal_clearance_m": 0.001}
+    assert pose_settings({"build": {"settings": {"bin_warm_start": True, "goal_clearance_m": 0.002}}}) == {
+        "bin_warm_start": True, "goal_clearance_m": 0.002}
+    assert BuildSettings(name="new").bin_warm_start and BuildSettings(name="new").goal_clearance_m == 0.002
