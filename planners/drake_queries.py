@@ -38,17 +38,17 @@ REPLAY_QUERIES = 16
 
 class EvaluationCounter:
     """A visualization callback that counts its program's evaluations and keeps a uniform,
-    seeded sample of the decision variables they were made at (all of them with `keep_all`)."""
+    seeded sample of the decision variables they were made at (REPLAY_QUERIES of them, read at
+    each call, so that `bench attribution` can keep them all)."""
 
-    def __init__(self, keep_all: bool = False) -> None:
+    def __init__(self) -> None:
         self.calls = 0
         self.sample: list[np.ndarray] = []
-        self.keep_all = keep_all
         self._rng = random.Random(0)
 
     def __call__(self, x) -> None:
         self.calls += 1
-        if self.keep_all or len(self.sample) < REPLAY_QUERIES:
+        if len(self.sample) < REPLAY_QUERIES:
             self.sample.append(np.array(x, float))
         else:
             k = self._rng.randrange(self.calls)

@@ -23,7 +23,7 @@ import numpy as np
 from ompl import base as ob
 from ompl import geometric as og
 
-from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints, snapped_to_ends
 from planners.ompl_adapter import (
     OmplProblem,
     drop_collinear,
@@ -330,12 +330,7 @@ class _OmplPlanner:
             op.release()
 
         # The path runs between the very start and goal states; snap away float noise, if any.
-        for end, q in ((0, problem.q_start), (-1, problem.q_goal)):
-            err = float(np.max(np.abs(Q[end] - q)))
-            if err > 1e-9:
-                return PlanResult(PlanStatus.ERROR, None, {**stats, "reason": f"path end off by {err:.3g} rad"})
-            Q[end] = q
-        return PlanResult(PlanStatus.SUCCESS, Q, stats)
+        return snapped_to_ends(problem, Q, stats)
 
 
 class RRTConnectPlanner(_OmplPlanner):

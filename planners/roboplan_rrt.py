@@ -24,7 +24,6 @@ cost of one check measured in `prepare` (outside the clock).
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from typing import Any, ClassVar
 
@@ -32,7 +31,7 @@ import numpy as np
 import roboplan.core as rpc
 import roboplan.rrt as rpr
 
-from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints, snapped_to_ends
 from planners.ompl_adapter import trial_seed
 from planners.roboplan_scene import RoboplanWorld, build_roboplan_world
 from planners.worlds import collision_world, remember
@@ -217,9 +216,4 @@ class RoboplanRRTPlanner:
         stats["simplify_time_s"] = time.perf_counter() - t_short
         stats["length_after_rad"] = float(np.sum(np.linalg.norm(np.diff(Q, axis=0), axis=1)))
         stats["waypoints"] = len(Q)
-        for end, q in ((0, problem.q_start), (-1, problem.q_goal)):
-            err = float(np.max(np.abs(Q[end] - q)))
-            if err > 1e-9:
-                return PlanResult(PlanStatus.ERROR, None, {**stats, "reason": f"path end off by {err:.3g} rad"})
-            Q[end] = q
-        return PlanResult(PlanStatus.SUCCESS, Q, stats)
+        return snapped_to_ends(problem, Q, stats)

@@ -51,13 +51,11 @@ def rewitness_dataset(name: str, *, argv: list[str]) -> dict[str, Any]:
             continue
         problem = problem_from_record(rec, scenes[rec["scene_key"]], time_limit_s=1.0)
         new, _ = witness_with_margin(problem, w)
-        rec = {k: v for k, v in rec.items() if k != "record_hash"}
+        rec = {**{k: v for k, v in rec.items() if k != "record_hash"}, "witness": new}
         if new["clearance_min_m"] >= MIN_WITNESS_CLEARANCE_M:
-            rec["witness"] = new
             replaced.append({"problem_id": rec["problem_id"], "old_m": w["clearance_min_m"],
                              "new_m": new["clearance_min_m"], "padding_m": new["padding_m"]})
         else:
-            rec["witness"] = new
             rec["benchmark"] = False
             dropped.append({"problem_id": rec["problem_id"], "family": rec["family"], "kind": rec["kind"],
                             "clearance_m": new["clearance_min_m"]})

@@ -7,7 +7,6 @@ Needs Debian's `chromium` (`apt-get install chromium`); run with `python -m pyte
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 from chromium_cdp import Chromium, find_chromium
