@@ -12,10 +12,12 @@ cheaper can decide:
 1. Kinematics on points. Every point the checks need (bounding-sphere centres, and the four
    rows of each part's pose) is stored as a homogeneous row in its link's frame; rows are
    ordered from the hand down to the base, so applying the local joint transforms from joint 7
-   to joint 1 is seven `np.dot` calls on growing leading blocks of small buffers.
+   to joint 1 is seven `np.dot` calls on growing leading blocks of small buffers. A batch of
+   states (a motion's samples) chains the joint transforms first and maps each link's rows once.
 2. Bounding spheres. Each primitive is covered by spheres (outer radius) that also contain an
    inner ball lying inside the primitive (inner radius). One gather and six array operations
-   give the squared distance of every (sphere, obstacle box) and (sphere, sphere) pair: no
+   give the squared distance of every (sphere, obstacle box) and (sphere, sphere) pair (in a
+   batch, an obstacle's side is a constant array, not gathered): no
    outer overlap means free; an inner overlap with a true box or another robot part means a
    certain collision.
 3. Joint tables. A self pair whose distance depends on one joint only (after dropping a joint
@@ -256,6 +258,22 @@ class CollisionWorld:
         self._d2 = np.empty(P)
         self._mask = np.empty(P, bool)
         self._ones3 = np.ones(3)
+        self._batch_idx: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._env_c = self._obs_c[self._iab[1, : self._n_env] - self._obs_row0]  # each scene pair's obstacle centre
+        # the joint tables as arrays, for the batched checks: one lookup for every table at once
+        T = len(tables)
+        self._tab_j = np.array([t[0] for t in tables], np.intp)
+        self._tab_lo = np.array([t[1] for t in tables], float)
+        self._tab_inv = np.array([t[2] for t in tables], float)
+        self._tab_n = np.array([t[3] for t in tables], float)
+        self._tab_k = [t[5] for t in tables]
+        width = max([t[3] for t in tables], default=0) + 1
+        cells = np.full((T, width), UNKNOWN, np.uint8)  # the last column: outside the table's range
+        for r, t in enumerate(tables):
+            cells[r, : t[3]] = np.frombuffer(bytes(t[4]), np.uint8)
+        self._tab_cells = cells.ravel()
+        self._tab_row0 = width * np.arange(T)
+        self._tab_out = np.array([t[3] for t in tables], np.intp)
 
     def _build_fk(self) -> None:
         """Local joint transforms from [cos q, sin q, 1] by one product, and the FK buffers.
@@ -308,21 +326,26 @@ class CollisionWorld:
         return self._rows
 
     def _batch_rows(self, Q: np.ndarray) -> np.ndarray:
-        """World rows of a batch (M, 7): (M, rows, 3)."""
+        """World rows of a batch (M, 7): (M, rows, 3).
+
+        The chain's products W_k = LT_k ... LT_1 (each link's frame to the world, x y z columns)
+        come first, six small batched products; each link's rows are then mapped once."""
         m = len(Q)
         cs = np.empty((m, 15))
         cs[:, :7] = np.cos(Q)
         cs[:, 7:14] = np.sin(Q)
         cs[:, 14] = 1.0
         LT = (cs @ self._M_full.T).reshape(m, 7, 4, 4)
-        buf = np.empty((m,) + self._rows0.shape)
-        buf[:] = self._rows0
-        for k in range(7, 0, -1):
-            e = self._link_end[k]
-            buf[:, :e] = np.matmul(buf[:, :e], LT[:, k - 1])
         out = np.empty((m,) + self._world0.shape)
-        out[:, : len(self._rows0)] = buf[..., :3]
-        out[:, len(self._rows0) :] = self._obs_c
+        e = self._link_end
+        W = LT[:, 0, :, :3]
+        for k in range(1, 8):
+            if k > 1:
+                W = np.matmul(LT[:, k - 1], W)
+            lo = e[k + 1] if k < 7 else 0
+            if e[k] > lo:
+                np.matmul(self._rows0[lo : e[k]], W, out=out[:, lo : e[k]])
+        out[:, e[1] :] = self._world0[e[1] :]  # link 0's rows (the world frame) and the obstacle centres
         return out
 
     def _place(self, p: int, rows: np.ndarray) -> fcl.CollisionObject:
@@ -347,17 +370,32 @@ class CollisionWorld:
         return np.dot(D, self._ones3, out=self._d2)
 
     def _batch_d2(self, rows: np.ndarray) -> np.ndarray:
-        """`_state_d2` for a batch of world rows (M, rows, 3): (M, P)."""
+        """`_state_d2` for a batch of world rows (M, rows, 3): (M, P). A scene pair's partner is
+        a fixed obstacle centre, so only the robot side is gathered for those."""
         m, n = rows.shape[:2]
-        idx = (self._iab[:, None, :] + (n * np.arange(m))[None, :, None]).reshape(2, -1)
-        G = rows.reshape(m * n, 3).take(idx, axis=0)  # row gathers: much faster than take(axis=1)
-        D = np.subtract(G[0], G[1], out=G[0])
+        flat = rows.reshape(m * n, 3)
+        idx_a, idx_b = self._batch_index(m, n)
+        D = flat.take(idx_a, axis=0).reshape(m, -1, 3)  # row gathers: faster than take(axis=1)
+        ne = self._n_env
+        D[:, :ne] -= self._env_c
+        D[:, ne:] -= flat.take(idx_b, axis=0).reshape(m, -1, 3)
         np.abs(D, out=D)
-        D = D.reshape(m, -1, 3)
         D -= self._H
         np.maximum(D, 0.0, out=D)
         D *= D
         return D @ self._ones3
+
+    def _batch_index(self, m: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """The row indices of a batch of M states of n rows each: every sphere pair's robot side
+        (M * P,) and the self pairs' other side (M * (P - scene pairs),)."""
+        key = (m, n)
+        idx = self._batch_idx.get(key)
+        if idx is None:
+            off = (n * np.arange(m))[:, None]
+            idx = ((self._iab[0][None, :] + off).ravel(), (self._iab[1][None, self._n_env :] + off).ravel())
+            if len(self._batch_idx) < 2 * CHUNK:
+                self._batch_idx[key] = idx
+        return idx
 
     def _collides(self, rows: np.ndarray, d2: np.ndarray, hits: np.ndarray, unsafe: list[int]) -> bool:
         """Decide one state from its overlapping sphere pairs `hits` and unproved tabled pairs:
@@ -449,19 +487,24 @@ class CollisionWorld:
             d2 = self._batch_d2(rows)
             near = d2 <= self._R2
             flagged = near.any(axis=1)
-            touching = np.zeros(len(Qc), bool)
-            unsafe = [[] for _ in range(len(Qc))]
-            for j, lo, inv, n, cells, k in self._tables:
-                x = (Qc[:, j] - lo) * inv
-                inside = (x >= 0.0) & (x < n)
-                c = np.full(len(Qc), UNKNOWN, np.uint8)
-                c[inside] = np.frombuffer(cells, np.uint8)[x[inside].astype(int)]
-                touching |= c == TOUCHING
-                for m in np.flatnonzero(c == UNKNOWN):
-                    unsafe[m].append(k)
-                flagged |= c != APART
+            touching = None
+            unknown = None
+            if len(self._tab_k):
+                x = (Qc[:, self._tab_j] - self._tab_lo) * self._tab_inv  # (M, T) cell coordinates
+                inside = (x >= 0.0) & (x < self._tab_n)
+                cell = np.where(inside, x, 0.0).astype(np.intp)
+                np.copyto(cell, self._tab_out, where=~inside)  # the UNKNOWN column
+                c = self._tab_cells.take(cell + self._tab_row0)
+                touching = (c == TOUCHING).any(axis=1)
+                unknown = c == UNKNOWN
+                flagged |= (c != APART).any(axis=1)
             for m in np.flatnonzero(flagged):
-                if touching[m] or self._collides(rows[m], d2[m], near[m].nonzero()[0], unsafe[m]):
+                if touching is not None and touching[m]:
+                    bad = True
+                else:
+                    unsafe = [] if unknown is None else [self._tab_k[t] for t in np.flatnonzero(unknown[m])]
+                    bad = self._collides(rows[m], d2[m], near[m].nonzero()[0], unsafe)
+                if bad:
                     out[start + m] = False
                     if stop_at_first:
                         return out

@@ -140,6 +140,26 @@ def test_held_can_is_part_of_the_robot():
     np.testing.assert_array_equal(free_with, drake_free)
 
 
+def test_batched_checks_agree_with_the_single_state_check_everywhere():
+    """The batched checks (motions, paths) answer exactly as the single-state check: with a held
+    can, for batches of every size, and past the joint limits where no table decides a pair."""
+    scene, _, _ = _setup("wall")
+    can = scene.cans[0]
+    held = HeldCan.from_grasp(can, truth_grasp(scene, can).X_WG)
+    world = CollisionWorld(scene, held=held, gripper_opening_m=2 * scene.spec.can.radius_m)
+    rng = np.random.default_rng(105)
+    lo, hi = world.robot.lower_rad, world.robot.upper_rad
+    Q = lo - 0.2 + (hi - lo + 0.4) * rng.random((1500, 7))  # some beyond the limits
+    single = np.array([world.is_free(q) for q in Q])
+    assert 0.1 < single.mean() < 0.9
+    np.testing.assert_array_equal(world.states_free(Q), single)
+    for size in (1, 7, 8, 63, 64, 65, 200):
+        for start in range(0, 600, size):
+            batch = Q[start : start + size]
+            bad = np.flatnonzero(~single[start : start + size])
+            assert world.first_collision(batch) == (int(bad[0]) if len(bad) else -1)
+
+
 def test_joint_tables_are_sound():
     """Wherever a table decides a self pair without an exact query, FCL agrees: apart cells are
     apart, touching cells collide."""
