@@ -18,6 +18,7 @@ TARGETS = {
     "certify": "suite.bench.certify",
     "attribution": "suite.bench.attribution",
     "agreement": "suite.bench.agreement",
+    "budget-flip": "suite.bench.budget_flip",
 }
 
 
