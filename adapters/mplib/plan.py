@@ -48,9 +48,8 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 import mplib
+import numpy as np
 from mplib import Planner, Pose
 from mplib.collision_detection import fcl
 
@@ -162,7 +161,7 @@ class World:
         validator's rule, or None. States of each segment a -> b: a + (k / steps)(b - a), k = 0..steps,
         steps = max(1, ceil(max_j |b_j - a_j| / resolution_rad))."""
         n = 0
-        for a, b in zip(path[:-1], path[1:]):
+        for a, b in zip(path[:-1], path[1:]):  # noqa: RUF007 (itertools.pairwise: Python 3.10+; mplib runs on 3.8)
             steps = max(1, math.ceil(float(np.max(np.abs(b - a))) / resolution_rad))
             for k in range(steps + 1):
                 if self.colliding(a + (k / steps) * (b - a)):
@@ -172,7 +171,8 @@ class World:
 
 
 def dense_states(path: np.ndarray, resolution_rad: float) -> int:
-    return sum(max(1, math.ceil(float(np.max(np.abs(b - a))) / resolution_rad)) + 1 for a, b in zip(path[:-1], path[1:]))
+    pairs = zip(path[:-1], path[1:])  # noqa: RUF007
+    return sum(max(1, math.ceil(float(np.max(np.abs(b - a))) / resolution_rad)) + 1 for a, b in pairs)
 
 
 def word(status: str) -> str:
@@ -218,7 +218,8 @@ def plan_problem(export: Path, problem: dict, workdir: Path, *, mode: str, seed:
         checks_s += time.perf_counter() - tc
         if bad is None:
             break
-        rejected.append({"waypoints": len(path), "first_colliding_state": bad, "states": dense_states(path, resolution)})
+        rejected.append({"waypoints": len(path), "first_colliding_state": bad,
+                         "states": dense_states(path, resolution)})
         path, status = None, "Timeout"
     elapsed = time.perf_counter() - t0
     stats = {"setup_s": setup_s, "attempts": attempts, "mplib_status": statuses}
@@ -304,7 +305,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="mplib: its planner as plan_qpos runs it; mplib-recheck: OUR wrapper re-checking at 0.01 rad")
     p.add_argument("--limit", type=int, default=None, help="plan only the first N problems")
     p.add_argument("--problems", default=None, metavar="ID,ID", help="plan only these problem_ids")
-    p.add_argument("--seed", type=int, default=1, help="seed of the first problem (the k-th gets seed + k; OMPL turns 0 into 1)")
+    p.add_argument("--seed", type=int, default=1,
+                   help="seed of the first problem (the k-th gets seed + k; OMPL turns 0 into 1)")
     p.add_argument("--reserve-s", type=float, default=0.1,
                    help="seconds of the budget kept for mplib's path simplification after the search (default 0.1)")
     p.add_argument("--send", choices=("path", "topp"), default="path",
@@ -325,7 +327,8 @@ def main(argv: list[str] | None = None) -> int:
                       and not res.get("held_can_probes_wrong") and res.get("held_can_pose_error_m", 0.0) < 1e-6)
                 bad += not ok
                 print(json.dumps(dict(res, ok=ok)))
-            print(f"self-check: {len(problems) - bad} of {len(problems)} problems agree with the export", file=sys.stderr)
+            print(f"self-check: {len(problems) - bad} of {len(problems)} problems agree with the export",
+                  file=sys.stderr)
             return 1 if bad else 0
         if args.out is None:
             p.error("--out is required")
