@@ -31,6 +31,7 @@ COMMANDS = {
     "import": ("suite.cli.import_", "judge an external planner's paths like a suite trial and add them as records"),
     "regions": ("suite.cli.regions", "build gcs's collision-free convex regions of a dataset's worlds ahead (cached)"),
     "bench": ("suite.cli.bench", "print speed figures (collision, perception, planners)"),
+    "docs": ("suite.cli.docs", "rewrite the figures of README.md and docs/ from the committed files they come from"),
 }
 
 
