@@ -2,9 +2,9 @@
 
 The state space is the arm's 7 joints (RealVectorStateSpace with the joint limits). States and
 motions are checked by the problem's python-fcl world (`planners.worlds.collision_world`): a state by
-`is_free`, a straight motion by two batched `first_collision` queries over samples at most
-`resolution_rad` apart in every joint, the end state and coarse samples first so that a blocked
-motion is rejected after few exact checks. `OmplProblem` creates every OMPL object of one solve
+`is_free`, a straight motion by `motion_samples_free` over samples at most `resolution_rad` apart
+in every joint: the end state and coarse samples first so that a blocked motion is rejected after
+few checks, then only the samples their distance bounds do not prove free. `OmplProblem` creates every OMPL object of one solve
 and releases them in dependency order.
 
 Randomness: OMPL draws every RNG's seed from one process-global seed generator. A trial restarts
@@ -18,7 +18,6 @@ simplifier has its own RNG.)
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -27,10 +26,9 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from planners.base import PlanningProblem
+from scenes.fcl_world import check_order
 
 DOF = 7
-#: How many samples of a motion (end state and coarsest first) go into the first batched query.
-COARSE_BATCH = 8
 
 
 # --- OMPL process state ----------------------------------------------------------------------------
@@ -70,32 +68,19 @@ def trial_seed(problem: PlanningProblem) -> int:
 # --- collision checking ----------------------------------------------------------------------------
 
 
-@functools.lru_cache(maxsize=4096)
-def _check_order(n: int) -> np.ndarray:
-    """Sample indices 1..n of a motion in checking order: the end state n, then the others
-    coarsest first (by the power of two dividing them), so a blocked motion fails early."""
-    i = np.arange(1, n)
-    ctz = np.zeros(len(i), int)
-    m = i.copy()
-    while np.any(m % 2 == 0):
-        even = m % 2 == 0
-        ctz[even] += 1
-        m[even] //= 2
-    order = i[np.lexsort((i, -ctz))]
-    return np.concatenate([[n], order])
-
-
 def motion_samples(q0: np.ndarray, q1: np.ndarray, resolution_rad: float) -> np.ndarray:
     """Samples of the straight motion q0 -> q1 (q0 excluded, q1 first), at most `resolution_rad`
     apart in every joint, in checking order."""
     d = q1 - q0
     n = max(1, math.ceil(float(np.max(np.abs(d))) / resolution_rad))
-    t = _check_order(n) / n
+    t = check_order(n) / n
     return q0 + t[:, None] * d
 
 
 class BatchMotionValidator(ob.MotionValidator):
-    """Checks a straight motion with batched python-fcl queries instead of one callback per state.
+    """Checks a straight motion in one call to the world (`CollisionWorld.motion_samples_free`:
+    batched python-fcl queries, samples proved free by their neighbours' distances skipped)
+    instead of one callback per state. The answer is that of checking every sample.
 
     The start state is taken as valid (as OMPL's DiscreteMotionValidator does).
     """
@@ -108,11 +93,8 @@ class BatchMotionValidator(ob.MotionValidator):
 
     def checkMotion(self, s1, s2) -> bool:  # OMPL's name
         self.motions += 1
-        Q = motion_samples(np.array(s1[0:DOF]), np.array(s2[0:DOF]), self.resolution_rad)
-        head = Q[:COARSE_BATCH]
-        if self.world.first_collision(head) >= 0:
-            return False
-        return len(Q) <= COARSE_BATCH or self.world.first_collision(Q[COARSE_BATCH:]) < 0
+        return self.world.motion_samples_free(np.array(s1[0:DOF]), np.array(s2[0:DOF]),
+                                              resolution_rad=self.resolution_rad)
 
 
 # --- the OMPL objects of one solve -----------------------------------------------------------------

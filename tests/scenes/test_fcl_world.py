@@ -160,6 +160,37 @@ def test_batched_checks_agree_with_the_single_state_check_everywhere():
             assert world.first_collision(batch) == (int(bad[0]) if len(bad) else -1)
 
 
+@pytest.mark.parametrize("variant", ["wall", "shelf"])
+def test_the_planners_motion_check_answers_as_every_sample_does(variant):
+    """`motion_samples_free` skips samples its distance bounds prove free: its answer is still
+    that of checking every sample, on long and short motions, free and blocked, with a held can,
+    and it evaluates fewer states."""
+    scene = generate_scene(load_spec(variant=variant).with_can_count(5), seed=1)
+    can = scene.cans[0]
+    held = HeldCan.from_grasp(can, truth_grasp(scene, can).X_WG)
+    rng = np.random.default_rng(106)
+    evaluated = every = 0
+    answers = []
+    for world in (CollisionWorld(scene), CollisionWorld(scene, held=held, gripper_opening_m=2 * scene.spec.can.radius_m)):
+        Q = world.robot.random_configurations(rng, 600)
+        starts = Q[world.states_free(Q)][:120]
+        for i, q0 in enumerate(starts):
+            for scale in (0.05, 0.3, 1.5):
+                q1 = np.clip(q0 + scale * rng.standard_normal(7), world.robot.lower_rad, world.robot.upper_rad)
+                samples = world.interpolate(np.array([q0, q1]), 0.01)[1:]
+                truth = world.first_collision(samples) < 0
+                c0 = world.checks
+                got = world.motion_samples_free(q0, q1, resolution_rad=0.01)
+                assert got == truth, (variant, i, scale)
+                answers.append(truth)
+                if truth:
+                    evaluated += world.checks - c0
+                    every += len(samples)
+    assert 0.2 < np.mean(answers) < 0.8  # both answers, often
+    print(f"{variant}: {evaluated} of {every} samples of the free motions evaluated")
+    assert evaluated < 0.8 * every  # and fewer states than every sample on the free motions
+
+
 def test_joint_tables_are_sound():
     """Wherever a table decides a self pair without an exact query, FCL agrees: apart cells are
     apart, touching cells collide."""
