@@ -28,6 +28,36 @@ class PlanStatus(str, enum.Enum):
     KILLED_TIMEOUT = "killed_timeout"  # the worker overran the hard time limit and was killed
 
 
+class FailureReason(str, enum.Enum):
+    """Why a trial failed, beside its status: one word per cause a reader can act on.
+
+    A planner names its cause in `stats["reason_code"]` (its free-text `stats["reason"]` keeps
+    the detail); the orchestrator names the causes it decides (the validator, the timing, a crash,
+    the clock). `suite.run.records.reason_code` reads a record's, old records included.
+    """
+
+    ENDPOINT_IN_COLLISION = "endpoint_in_collision"  # the start or goal configuration collides
+    ENDPOINT_OUT_OF_LIMITS = "endpoint_out_of_limits"  # the start or goal is outside the joint limits
+    NO_GOAL_IK = "no_goal_ik"  # the problem has no goal configuration (no collision-free IK)
+    NO_IK_AT_KNOT = "no_ik_at_knot"  # a task waypoint has no IK solution within the tolerances
+    GOAL_NOT_REACHED = "goal_not_reached"  # the waypoints end off the goal, or the last step collides
+    SOLVER_FAILED = "solver_failed"  # the optimizer stopped without a usable solution
+    PATH_STILL_COLLIDES = "path_still_collides"  # the planner's own repairs left a collision
+    REGIONS_MISSING = "regions_missing"  # no convex regions were built for the world
+    REGIONS_DISCONNECTED = "regions_disconnected"  # the regions do not connect start and goal
+    SEARCH_FAILED = "search_failed"  # a sampling planner stopped without a solution, within budget
+    BUDGET_SPENT = "budget_spent"  # the planning budget ran out (the planner said so)
+    LATE_PATH = "late_path"  # a valid path came after the budget (it does not count)
+    PATH_REJECTED = "path_rejected"  # the independent validator rejected the claimed path
+    PATH_OVER_LIMIT = "path_over_limit"  # the claimed path is over the judge's size limits
+    TIMING_FAILED = "timing_failed"  # TOPP-RA could not time the path
+    PLANNER_ERROR = "planner_error"  # the planner raised or returned an error
+    OUT_OF_MEMORY = "out_of_memory"  # the worker hit its memory cap
+    CRASH = "crash"  # the worker process died
+    KILLED = "killed"  # the worker overran the hard time limit and was killed
+    NOT_STATED = "not_stated"  # an external or old record that gives no cause
+
+
 #: The motions of the paper's pick-and-place cycle, in order.
 PROBLEM_KINDS = ("approach", "descend", "lift", "transit", "return")
 
@@ -133,16 +163,18 @@ def check_endpoints(problem: PlanningProblem, world) -> PlanResult | None:
     if both ends are valid.
     """
     if problem.pre_status is not None:
-        return PlanResult(problem.pre_status, None, {})
+        return PlanResult(problem.pre_status, None, {"reason_code": FailureReason.NO_GOAL_IK.value})
     if problem.q_goal is None:
-        return PlanResult(PlanStatus.IK_FAILED, None, {})
+        return PlanResult(PlanStatus.IK_FAILED, None, {"reason_code": FailureReason.NO_GOAL_IK.value})
     lo, hi = world.robot.lower_rad, world.robot.upper_rad
     for q, status in ((problem.q_start, PlanStatus.INVALID_START), (problem.q_goal, PlanStatus.INVALID_GOAL)):
         q = np.asarray(q, float)
         if q.shape != (7,) or not np.all(np.isfinite(q)) or np.any(q < lo - 1e-9) or np.any(q > hi + 1e-9):
-            return PlanResult(status, None, {"reason": "outside joint limits"})
+            return PlanResult(status, None, {"reason": "outside joint limits",
+                                             "reason_code": FailureReason.ENDPOINT_OUT_OF_LIMITS.value})
         if not world.is_free(q):
-            return PlanResult(status, None, {"reason": "in collision"})
+            return PlanResult(status, None, {"reason": "in collision",
+                                             "reason_code": FailureReason.ENDPOINT_IN_COLLISION.value})
     return None
 
 
@@ -152,6 +184,7 @@ def snapped_to_ends(problem: PlanningProblem, path: np.ndarray, stats: dict) -> 
     for end, q in ((0, problem.q_start), (-1, problem.q_goal)):
         err = float(np.max(np.abs(path[end] - q)))
         if err > 1e-9:
-            return PlanResult(PlanStatus.ERROR, None, {**stats, "reason": f"path end off by {err:.3g} rad"})
+            return PlanResult(PlanStatus.ERROR, None, {**stats, "reason": f"path end off by {err:.3g} rad",
+                                                       "reason_code": FailureReason.PLANNER_ERROR.value})
         path[end] = q
     return PlanResult(PlanStatus.SUCCESS, path, stats)

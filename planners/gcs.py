@@ -32,7 +32,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.base import FailureReason, PlanningProblem, PlanResult, PlanStatus, check_endpoints
 from planners.gcs_regions import RegionOptions, RegionSet, problem_hash, regions_for
 from planners.gcs_solve import SOLVERS, checked_path
 from planners.worlds import collision_world, remember
@@ -135,12 +135,14 @@ class GcsPlanner:
         }
         if rs is None or len(rs) == 0:
             stats["reason"] = "no regions for this world"
+            stats["reason_code"] = FailureReason.REGIONS_MISSING.value
             return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
         q_start = np.asarray(problem.q_start, float)
         q_goal = np.asarray(problem.q_goal, float)
         stats["regions_connected"] = rs.connected(q_start, q_goal)
         if not stats["regions_connected"]:
             stats["reason"] = "the regions do not connect start and goal"
+            stats["reason_code"] = FailureReason.REGIONS_DISCONNECTED.value
             stats["solve_time_s"] = time.perf_counter() - t0
             return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
 
@@ -155,6 +157,12 @@ class GcsPlanner:
         stats["solve_time_s"] = time.perf_counter() - t0
         if path is None:
             status = PlanStatus.TIMEOUT if stats.get("timed_out") else PlanStatus.NO_SOLUTION
+            if status is PlanStatus.TIMEOUT:
+                stats["reason_code"] = FailureReason.BUDGET_SPENT.value
+            elif str(stats.get("reason", "")).startswith(("GCS failed", "the solution does not join")):
+                stats["reason_code"] = FailureReason.SOLVER_FAILED.value
+            else:
+                stats["reason_code"] = FailureReason.PATH_STILL_COLLIDES.value
             return PlanResult(status, None, stats)
         stats["waypoints"] = len(path)
         return PlanResult(PlanStatus.SUCCESS, path, stats)

@@ -50,7 +50,7 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import PiecewisePose
 
 from planners.drake_queries import EvaluationCounter, query_stats
-from planners.base import PROBLEM_KINDS, PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.base import FailureReason, PROBLEM_KINDS, PlanningProblem, PlanResult, PlanStatus, check_endpoints
 from scenes.errors import SuiteError
 from planners.worlds import collision_world, drake_plan_scene, remember
 
@@ -229,7 +229,8 @@ class NominalIkPlanner:
         t_start = time.perf_counter()
         wp_t = np.array([w.t for w in problem.waypoints], float)
         if len(wp_t) < 2 or np.any(np.diff(wp_t) <= 0):
-            return PlanResult(PlanStatus.ERROR, None, {"reason": "waypoints need >= 2 increasing times"})
+            return PlanResult(PlanStatus.ERROR, None, {"reason": "waypoints need >= 2 increasing times",
+                                                       "reason_code": FailureReason.PLANNER_ERROR.value})
         nominal = PiecewisePose.MakeLinear(list(wp_t), [RigidTransform(w.X_WG) for w in problem.waypoints])
         times = knot_times(wp_t, cfg.knot_dt_tu)
         prog = self._program(problem)
@@ -299,7 +300,9 @@ class NominalIkPlanner:
             if isinstance(out, str):
                 stats.update(counts, knots=len(knots), failed_knot=i, failed_t=float(times[i]),
                              solve_time_s=time.perf_counter() - t_start,
-                             reason=f"knot {i} (t={times[i]:g}): {out}")
+                             reason=f"knot {i} (t={times[i]:g}): {out}",
+                             reason_code=(FailureReason.BUDGET_SPENT if out == _OUT_OF_TIME
+                                          else FailureReason.NO_IK_AT_KNOT).value)
                 status = PlanStatus.TIMEOUT if out == _OUT_OF_TIME else PlanStatus.NO_SOLUTION
                 return PlanResult(status, None, stats)
             knots += out
@@ -309,13 +312,15 @@ class NominalIkPlanner:
                      solve_time_s=time.perf_counter() - t_start)
         if goal_dev > cfg.goal_tolerance_rad:
             stats.update(failed_knot=len(times) - 1, failed_t=t_end,
-                         reason=f"last knot {goal_dev:.3f} rad from q_goal")
+                         reason=f"last knot {goal_dev:.3f} rad from q_goal",
+                         reason_code=FailureReason.GOAL_NOT_REACHED.value)
             return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
         if goal_dev < 1e-4:
             path[-1] = q_goal  # the last knot is q_goal up to solver tolerance
         elif world.motion_free(path[-1], q_goal, resolution_rad=cfg.segment_check_rad):
             path.append(q_goal)
         else:
-            stats.update(reason="step from the last knot to q_goal collides")
+            stats.update(reason="step from the last knot to q_goal collides",
+                         reason_code=FailureReason.GOAL_NOT_REACHED.value)
             return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
         return PlanResult(PlanStatus.SUCCESS, np.array(path), stats)

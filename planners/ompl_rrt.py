@@ -23,7 +23,7 @@ import numpy as np
 from ompl import base as ob
 from ompl import geometric as og
 
-from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints, snapped_to_ends
+from planners.base import FailureReason, PlanningProblem, PlanResult, PlanStatus, check_endpoints, snapped_to_ends
 from planners.ompl_adapter import (
     OmplProblem,
     drop_collinear,
@@ -237,6 +237,10 @@ class _OmplPlanner:
         if path is not None and cfg.interpolate_rad is not None:
             path = world.interpolate(path, cfg.interpolate_rad)
         stats["interpolated"] = cfg.interpolate_rad is not None
+        code = {PlanStatus.TIMEOUT: FailureReason.BUDGET_SPENT, PlanStatus.NO_SOLUTION: FailureReason.SEARCH_FAILED,
+                PlanStatus.ERROR: FailureReason.PLANNER_ERROR}.get(result.status)
+        if code is not None:
+            stats.setdefault("reason_code", code.value)
         return PlanResult(result.status, path, stats)
 
     @staticmethod

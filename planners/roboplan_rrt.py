@@ -31,7 +31,7 @@ import numpy as np
 import roboplan.core as rpc
 import roboplan.rrt as rpr
 
-from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints, snapped_to_ends
+from planners.base import FailureReason, PlanningProblem, PlanResult, PlanStatus, check_endpoints, snapped_to_ends
 from planners.ompl_adapter import trial_seed
 from planners.roboplan_scene import RoboplanWorld, build_roboplan_world
 from planners.worlds import collision_world, remember
@@ -178,7 +178,8 @@ class RoboplanRRTPlanner:
         stats: dict[str, Any] = {"solver": self.solver, "seed": seed, "range_rad": cfg.range_rad,
                                  "resolution_rad": cfg.collision_check_step_rad}
         if search_s <= 0:
-            return PlanResult(PlanStatus.TIMEOUT, None, {**stats, "reason": "no time left for the search"})
+            return PlanResult(PlanStatus.TIMEOUT, None, {**stats, "reason": "no time left for the search",
+                                                         "reason_code": FailureReason.BUDGET_SPENT.value})
         names = rw.scene.getJointNames()
         start = rpc.JointConfiguration(names, np.asarray(problem.q_start, float))
         goal = rpc.JointConfiguration(names, np.asarray(problem.q_goal, float))
@@ -200,10 +201,10 @@ class RoboplanRRTPlanner:
         if path is None:
             stats["reason"] = error
             if TIMEOUT_MESSAGE in error:
-                return PlanResult(PlanStatus.TIMEOUT, None, stats)
+                return PlanResult(PlanStatus.TIMEOUT, None, {**stats, "reason_code": FailureReason.BUDGET_SPENT.value})
             if NODES_MESSAGE in error:
-                return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
-            return PlanResult(PlanStatus.ERROR, None, stats)
+                return PlanResult(PlanStatus.NO_SOLUTION, None, {**stats, "reason_code": FailureReason.SEARCH_FAILED.value})
+            return PlanResult(PlanStatus.ERROR, None, {**stats, "reason_code": FailureReason.PLANNER_ERROR.value})
         Q = np.array(path.positions, float).reshape(-1, 7)
         stats["waypoints_before"] = len(Q)
         stats["length_before_rad"] = float(np.sum(np.linalg.norm(np.diff(Q, axis=0), axis=1)))

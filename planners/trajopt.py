@@ -33,7 +33,7 @@ from pydrake.planning import KinematicTrajectoryOptimization
 from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import BsplineTrajectory
 
-from planners.base import PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.base import FailureReason, PlanningProblem, PlanResult, PlanStatus, check_endpoints
 from planners.drake_queries import EvaluationCounter, query_stats
 from scenes.errors import SuiteError
 from planners.worlds import collision_world, drake_plan_scene, remember
@@ -322,6 +322,9 @@ class TrajoptPlanner:
         stats.update(self._queries(trajopt, prog, distance, evaluations, samples, sum(queries)))
         if time.perf_counter() >= deadline:
             stats["reason"] = "time limit reached"
+            stats["reason_code"] = FailureReason.BUDGET_SPENT.value
             return PlanResult(PlanStatus.TIMEOUT, None, stats)
         stats["reason"] = reason
+        stats["reason_code"] = (FailureReason.PATH_STILL_COLLIDES if reason.startswith("path still collides")
+                                else FailureReason.SOLVER_FAILED).value
         return PlanResult(PlanStatus.NO_SOLUTION, None, stats)

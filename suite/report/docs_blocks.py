@@ -22,6 +22,8 @@ from typing import Any
 from scenes.errors import SuiteError
 
 REFERENCE_RUN = Path("results") / "reference"
+#: The peers run: the suite's `rrt`, `roboplan-rrt` and the imported `mplib` rows, one run.
+PEERS_RUN = Path("results") / "peers"
 #: How the README names the planners of its reference run.
 PLANNER_LABELS = {
     "ik": "`ik` (the paper's nominal waypoints)",
@@ -119,6 +121,35 @@ def dataset_composition(root: Path, name: str = "recycle-v3") -> str:
         c = fams[fam]
         lines.append(f"| {fam} | {c['all']} ({c['nt']}) | {c['tune_nt']} ({_pct(c['tune_nt'], c['nt'])}) | "
                      f"{c['test_nt']} | {c['quick']} ({c['quick_nt']}, {_pct(c['quick_nt'], quick_nt)}) |")
+    return "\n".join(lines) + "\n"
+
+
+def peers_table(root: Path) -> str:
+    """The README's peers table: per planner of the peers run, success, the median warm planning
+    time per family (successes), the length against the best known, and the attribution."""
+    summary = json.loads((root / PEERS_RUN / "summary.json").read_text(encoding="utf-8"))
+    families = sorted({f for p in summary["planners"].values() for f in p.get("by_family", {})})
+    lines = ["| planner | valid | " + " | ".join(f"`{f}` (s)" for f in families)
+             + " | length / best known | queries (median) | µs a query | query share |",
+             "|---|---|" + "---|" * len(families) + "---|---|---|---|"]
+    for name, p in summary["planners"].items():
+        s = p["success"]
+        times = []
+        for f in families:
+            fam = p.get("by_family", {}).get(f)
+            med = ((fam or {}).get("metrics", {}).get("planning_time_s") or {}).get("median")
+            k = (fam or {}).get("success", {}).get("k", 0)
+            n = (fam or {}).get("success", {}).get("n", 0)
+            times.append("-" if med is None else f"{med:.3g} ({k}/{n})")
+        ratio = ((p.get("metrics") or {}).get("length_ratio") or {}).get("median")
+        att = p.get("attribution") or {}
+        q, spq, share = att.get("queries"), att.get("s_per_query"), att.get("query_share")
+        lower = " (at least)" if "roboplan" in str(att.get("engine", "")) else ""
+        lines.append(f"| `{name}` | {s['k']}/{s['n']} | " + " | ".join(times) + " | "
+                     + ("-" if ratio is None else f"{ratio:.2f}") + " | "
+                     + ("-" if q is None else f"{q:,.0f}{lower}") + " | "
+                     + ("-" if spq is None else f"{1e6 * spq:.1f}") + " | "
+                     + ("-" if share is None else f"{100 * share:.0f}%{lower}") + " |")
     return "\n".join(lines) + "\n"
 
 

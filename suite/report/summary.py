@@ -59,7 +59,8 @@ def summary_json(
     """The machine-readable summary: the same numbers as summary.md, NaN written as null.
 
     Keys: distinct_problems, scenes, trivial_problems, few_problems (fewer than FEW_PROBLEMS),
-    planners: {NAME: {success: {k, n, rate, ci95, trials}, status_counts, certification: {certified,
+    planners: {NAME: {success: {k, n, rate, ci95, trials}, status_counts, failure_causes: {CAUSE:
+    {FAMILY: trials}} (planners.base.FailureReason), certification: {certified,
     unproved, collision, not checked} (successful trials by exact verdict), cold_start {cold_trials,
     warm_trials, planning_time_s: {cold, warm}, setup_time_s: {cold, warm}} (time medians are over
     warm trials), attribution {engine, trials, queries, s_per_query, query_share} (or null for a
@@ -86,6 +87,7 @@ def summary_json(
         out["planners"][p] = {
             "success": _success_json(g),
             "status_counts": g.status_counts,
+            "failure_causes": _causes(records, p),
             "certification": certification_counts(records, p),
             "attribution": attribution_summary(records, p),
             "cold_start": cold_start(records, p),
@@ -193,3 +195,18 @@ def write_summary(
     )
     log.info("wrote %s, %s, %s, %s", md_path, json_path, csv_path, paired_path)
     return [md_path, json_path, csv_path, paired_path]
+
+
+def _causes(records, planner: str) -> dict[str, dict[str, int]]:
+    """A planner's failed trials by enumerated cause, each by family: {cause: {family: count}}."""
+    from suite.run.records import reason_code
+
+    out: dict[str, dict[str, int]] = {}
+    for r in records:
+        if r.get("planner") != planner:
+            continue
+        code = reason_code(r)
+        if code is not None:
+            fam = str(r.get("family") or r.get("variant"))
+            out.setdefault(code, {})[fam] = out.setdefault(code, {}).get(fam, 0) + 1
+    return out

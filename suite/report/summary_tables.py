@@ -216,6 +216,13 @@ CERTIFICATION_INTRO = (
     "collides), `unproved` (a segment shorter than 1e-6 rad still unproved: a graze within micrometres).")
 
 
+REASON_CODE_INTRO = (
+    "Each failed trial's enumerated cause (`planners.base.FailureReason`): a planner names its own "
+    "(no IK at a knot, regions disconnected, solver failed, search failed, budget spent), the judge "
+    "names path rejected, late path, timing failed; crashes and kills are the orchestrator's. Records "
+    "written before causes were recorded get theirs from their status.")
+
+
 def failure_rows(groups: Sequence[GroupSummary], statuses: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     failures = [s for s in statuses if s != SUCCESS]
     headers = ["planner", "trials", "failed"] + failures
@@ -253,6 +260,28 @@ def failure_reason_rows(records: Sequence[dict[str, Any]], planners: Sequence[st
     headers = ["status", "reason", *planners]
     ordered = sorted(counts.items(), key=lambda kv: (-sum(kv[1].values()), kv[0]))
     return headers, [[status, reason, *(c.get(p, 0) for p in planners)] for (status, reason), c in ordered]
+
+
+def reason_code_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+    """Failed trials by enumerated cause (`planners.base.FailureReason`), per planner and family:
+    one row per (planner, cause), one column per family, the most frequent causes first."""
+    from suite.run.records import reason_code
+
+    counts: dict[tuple[str, str], dict[str, int]] = {}
+    families: set[str] = set()
+    for r in records:
+        code = reason_code(r)
+        if code is None:
+            continue
+        fam = str(r.get("family") or r.get("variant"))
+        families.add(fam)
+        row = counts.setdefault((r["planner"], code), {})
+        row[fam] = row.get(fam, 0) + 1
+    fams = sorted(families)
+    order = {p: i for i, p in enumerate(planners)}
+    ordered = sorted(counts.items(), key=lambda kv: (order.get(kv[0][0], len(order)), -sum(kv[1].values()), kv[0][1]))
+    headers = ["planner", "cause", "all", *fams]
+    return headers, [[p, code, sum(c.values()), *(c.get(f, 0) for f in fams)] for (p, code), c in ordered]
 
 
 def paired_rows(pairs: Sequence[PairedComparison]) -> tuple[list[str], list[list[Any]]]:
@@ -311,6 +340,10 @@ def summary_markdown(
         md.append(tabulate(*reversed(cold_rows(records, planners)), tablefmt="github"))
     md += ["", "## Failures by status (trials)", ""]
     md.append(tabulate(*reversed(failure_rows(summary.overall, statuses_in(records))), tablefmt="github"))
+    causes = reason_code_rows(records, planners)
+    if causes[1]:
+        md += ["", "## Failures by cause, per planner and family (trials)", "", REASON_CODE_INTRO, ""]
+        md.append(tabulate(*reversed(causes), tablefmt="github"))
     md += ["", "## Per planner and problem kind", ""]
     md.append(tabulate(*reversed(group_rows(summary.by_kind, key="problem")), tablefmt="github"))
     if len({r["variant"] for r in records}) > 1:

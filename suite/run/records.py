@@ -106,6 +106,62 @@ def is_success(rec: dict[str, Any]) -> bool:
     return rec.get("status") == SUCCESS
 
 
+#: The cause a status alone names (the orchestrator's statuses, and a planner's that gives none).
+_STATUS_REASONS = {
+    "invalid_solution": "path_rejected",
+    "timing_failed": "timing_failed",
+    "crash": "crash",
+    "killed_timeout": "killed",
+    "timeout": "budget_spent",
+    "ik_failed": "no_goal_ik",
+    "error": "planner_error",
+}
+
+
+#: The free-text reasons the suite's planners wrote before they named a cause, and that cause.
+_OLD_REASONS = (
+    (("last knot", "step from the last knot"), "goal_not_reached"),
+    (("knot ",), "no_ik_at_knot"),
+    (("the regions do not connect",), "regions_disconnected"),
+    (("no regions",), "regions_missing"),
+    (("GCS failed", "the solution does not join", "solver failed"), "solver_failed"),
+    (("path still collides", "the path through the regions"), "path_still_collides"),
+    (("in collision",), "endpoint_in_collision"),
+    (("outside joint limits",), "endpoint_out_of_limits"),
+)
+_SAMPLERS = ("RRTConnect", "RRTstar", "BITstar", "AORRTC", "PRM", "roboplan RRT-Connect")
+
+
+def reason_code(rec: dict[str, Any]) -> str | None:
+    """A failed record's enumerated cause (`planners.base.FailureReason`'s value), None for a
+    success. Read from the record (`reason_code`), else worked out as the judge works it out,
+    so old records and imported ones get one too (`not_stated` where nothing says)."""
+    if is_success(rec):
+        return None
+    given = rec.get("reason_code")
+    if given:
+        return str(given)
+    status = rec.get("status")
+    stats = rec.get("stats") or {}
+    if stats.get("reason") == "path_over_limit":
+        return "path_over_limit"
+    if stats.get("reason") == "out_of_memory":
+        return "out_of_memory"
+    if status == "timeout" and "late_by_s" in stats:
+        return "late_path"
+    if status in ("invalid_solution", "timing_failed", "crash", "killed_timeout"):
+        return _STATUS_REASONS[status]
+    if stats.get("reason_code"):
+        return str(stats["reason_code"])
+    text = str(stats.get("reason") or "")
+    for prefixes, code in _OLD_REASONS:  # records written before planners named their cause
+        if text.startswith(prefixes):
+            return code
+    if status == "no_solution" and not text and stats.get("solver") in _SAMPLERS:
+        return "search_failed"
+    return _STATUS_REASONS.get(str(status), "not_stated")
+
+
 def problem_key(rec: dict[str, Any]) -> tuple:
     """The identity of the planning problem: its content hash (`problem_id`) where the record has
     one, else (scene_seed, variant, can_id, problem kind) as in runs made before problems had one.

@@ -190,7 +190,8 @@ def failure_record(spec: TrialSpec, status: str, message: str, wall_time_s: floa
         "q_start": None if p.q_start is None else [float(v) for v in p.q_start],
         "q_goal": None if p.q_goal is None else [float(v) for v in p.q_goal],
         "status": status, "planning_time_s": wall_time_s, "path": None, "metrics": {},
-        "stats": {"error": message}, **spec.meta,
+        "stats": {"error": message}, "reason_code": "killed" if status == "killed_timeout" else "crash",
+        **spec.meta,
     }
 
 

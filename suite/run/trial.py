@@ -158,7 +158,7 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
         record = trial_record(spec)
         record.update(status=PlanStatus.CRASH.value, planning_time_s=time.perf_counter() - t0, path=None,
                       metrics={}, stats={"reason": "out_of_memory", "error": f"MemoryError: {exc}"[:200],
-                                         "memory_limit_mb": _MEMORY_LIMIT_MB})
+                                         "memory_limit_mb": _MEMORY_LIMIT_MB}, reason_code="out_of_memory")
         return record
 
 
@@ -311,6 +311,8 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
                            reference_length_rad=spec.meta.get("reference_length_rad"),
                            reference_ee_length_m=spec.meta.get("reference_ee_length_m"))
             metrics = record_metrics(scored)  # NaN (undefined, or timing failed) stored as null
+    from suite.run.records import reason_code
+
     record.update(
         status=status.value,
         planning_time_s=planning_time_s,
@@ -320,6 +322,7 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
         certification=certification,
         stats=_jsonable(stats),
     )
+    record["reason_code"] = reason_code({k: v for k, v in record.items() if k != "reason_code"})
     return record
 
 

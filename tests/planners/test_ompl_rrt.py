@@ -76,12 +76,14 @@ def test_endpoint_in_collision_is_reported_at_once(transit, end):
     elapsed_s = time.perf_counter() - t0
     assert r.status is (PlanStatus.INVALID_START if end == "start" else PlanStatus.INVALID_GOAL)
     assert r.path is None and r.stats["reason"] == "in collision"
+    assert r.stats["reason_code"] == "endpoint_in_collision"
     assert r.stats["collision_checks"] <= 2 and elapsed_s < 0.5
 
 
 def test_ik_failure_passes_through(transit):
     r = make_planner("rrt").plan(transit.with_(q_goal=None))
     assert r.status is PlanStatus.IK_FAILED and r.path is None
+    assert r.stats["reason_code"] == "no_goal_ik"
 
 
 def test_same_seed_same_path_different_seed_other_path(problems, transit):
