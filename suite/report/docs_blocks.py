@@ -52,8 +52,8 @@ def answer_table(root: Path) -> str:
             c = cans.setdefault(e["planner"], [0, 0])
             c[0] += int(e.get("cans_in_bin", 0))
             c[1] += int(e.get("cans_total", 0))
-    lines = ["| planner | success (95% CI) | exact verdict: certified / unproved / collision | time to solve (s) "
-             "| length / best known | min clearance (mm) | cans in the bin, in physics |",
+    lines = [("| planner | success (95% CI) | exact verdict: certified / unproved / collision | time to solve (s) "
+              "| length / best known | min clearance (mm) | cans in the bin, in physics |"),
              "|---|---|---|---|---|---|---|"]
     for name, p in summary["planners"].items():
         s = p["success"]
@@ -115,8 +115,8 @@ def dataset_composition(root: Path, name: str = "recycle-v3") -> str:
             c["quick"] += rec["problem_id"] in quick
             c["quick_nt"] += nt and rec["problem_id"] in quick
     quick_nt = sum(c["quick_nt"] for c in fams.values())
-    lines = ["| family | problems (non-trivial) | tune split, non-trivial (share) | test split, non-trivial "
-             "| quick tier (non-trivial, share of its non-trivial) |", "|---|---|---|---|---|"]
+    lines = [("| family | problems (non-trivial) | tune split, non-trivial (share) | test split, non-trivial "
+              "| quick tier (non-trivial, share of its non-trivial) |"), "|---|---|---|---|---|"]
     for fam in sorted(fams):
         c = fams[fam]
         lines.append(f"| {fam} | {c['all']} ({c['nt']}) | {c['tune_nt']} ({_pct(c['tune_nt'], c['nt'])}) | "

@@ -15,11 +15,17 @@ from typing import Any
 
 from suite.report.html.markup import esc, inline_md, png_img, table
 from suite.report.plots_common import PLOTS_DIR
-from suite.report.summary_stats import N_RESAMPLES, GroupSummary, PairedComparison, RunSummary
+from suite.report.summary_stats import (
+    N_RESAMPLES,
+    GroupSummary,
+    PairedComparison,
+    RunSummary,
+)
 from suite.report.summary_tables import (
     ATTRIBUTION_INTRO,
     CERTIFICATION_INTRO,
     COLD_INTRO,
+    REASON_CODE_INTRO,
     attribution_rows,
     certification_rows,
     cold_rows,
@@ -29,6 +35,7 @@ from suite.report.summary_tables import (
     failure_rows,
     group_rows,
     paired_rows,
+    reason_code_rows,
 )
 from suite.run.records import statuses_in
 
@@ -200,8 +207,11 @@ def failures_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: Run
                   planners: Sequence[str]) -> str:
     """Failed trials by status, and by the reason the planner gave."""
     headers, rows = failure_reason_rows(records, planners)
+    c_headers, c_rows = reason_code_rows(records, planners)
     return "".join([
         "<h3>By status (trials)</h3>", table(*failure_rows(summary.overall, statuses_in(records))),
+        "<h3>By cause, per planner and family (trials)</h3>", inline_md(REASON_CODE_INTRO),
+        table(c_headers, [[*r[:3], *(c or "" for c in r[3:])] for r in c_rows]) if c_rows else "<p>No trial failed.</p>",
         "<h3>By stated reason (trials)</h3>",
         inline_md("What each failed trial's planner said (numbers in the text shown as #, so one cause is one "
                   "row). Filter the problem table below by planner and status to see the problems."),
