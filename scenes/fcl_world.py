@@ -48,22 +48,8 @@ from time import perf_counter as _clock
 import fcl
 import numpy as np
 
-from scenes.fcl_shapes import (
-    G_INDEX,
-    Part,
-    aabb_half_extents,
-    cover_spheres,
-    fcl_geometry,
-    grown_dims,
-)
-from scenes.fcl_tables import (
-    APART,
-    TABLE_MARGIN_M,
-    TOUCHING,
-    UNKNOWN,
-    on_axis,
-    pair_table,
-)
+from scenes.fcl_shapes import G_INDEX, Part, aabb_half_extents, cover_spheres, fcl_geometry, grown_dims
+from scenes.fcl_tables import APART, TABLE_MARGIN_M, TOUCHING, UNKNOWN, on_axis, pair_table
 from scenes.robot_model import RobotModel, load_robot
 from scenes.scene import HeldCan, Scene
 
