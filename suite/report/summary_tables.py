@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+import textwrap
 from collections.abc import Sequence
 from typing import Any
 
@@ -75,15 +76,32 @@ def common_rows(stats: dict[str, dict[str, MetricStats]], planners: Sequence[str
     return headers, rows
 
 
+#: The terminal table's metric columns (medians over each planner's solved problems); every metric
+#: with its IQR is in summary.md.
+TERMINAL_METRICS = {"length_ratio": "length /\nreference", "clearance_min_m": "clearance\n(mm)"}
+
+
 def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None) -> str:
-    """The per-planner table for the terminal: success k/n with its interval and median [IQR] of each
-    metric, over distinct problems, then the composition line (and its warning when too few)."""
+    """The per-planner table for the terminal, narrow enough for 80 columns: success k/n with its
+    interval, the median time to solve (failures at the budget) and the medians of a few metrics,
+    over distinct problems; then the composition line (and its warning when too few), the exact
+    verdicts, and where the rest is."""
     if not records:
         return "no trial records"
     groups = summarize(records, planners=planners)
-    headers, rows = group_rows(groups, key=None)
-    return (tabulate(rows, headers=headers, tablefmt="simple") + "\n" + composition(records) + "\n"
-            + certification_line(records, [g.planner for g in groups]))
+    headers = ["planner", "success (95% CI)", "time to\nsolve (s)", *TERMINAL_METRICS.values()]
+    rows = []
+    for g in groups:
+        cells = [g.planner, _rate(g), "n/a" if g.time_to_solve.n == 0 else format_number(g.time_to_solve.median)]
+        for m in TERMINAL_METRICS:
+            st = g.metrics[m]
+            scale = 1000.0 if m == "clearance_min_m" else 1.0
+            cells.append("n/a" if st.n == 0 else format_number(scale * st.median))
+        rows.append(cells)
+    lines = [composition(records), certification_line(records, [g.planner for g in groups]),
+             "Medians; every metric with its quartiles, per family and kind: summary.md (and report.html)."]
+    return tabulate(rows, headers=headers, tablefmt="simple") + "\n" + "\n".join(
+        textwrap.fill(ln, width=80, break_on_hyphens=False) for ln in "\n".join(lines).split("\n"))
 
 
 def certification_line(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:
