@@ -154,6 +154,71 @@ class Planner(Protocol):
     # Optional: `prepare(problem) -> None` builds what depends on the problem's world only (a Drake
     # diagram, a program); the orchestrator calls it before starting the clock and records its
     # time as `setup_time_s`, as it builds the python-fcl world of every problem outside the clock.
+    # `PlannerBase` below implements this protocol as a template: a planner then writes `solve` only.
+
+
+#: The cause a failure status names when its planner gave none (`PlannerBase.plan` fills it in).
+_STATUS_CAUSE = {
+    PlanStatus.TIMEOUT: FailureReason.BUDGET_SPENT,
+    PlanStatus.ERROR: FailureReason.PLANNER_ERROR,
+    PlanStatus.IK_FAILED: FailureReason.NO_GOAL_IK,
+}
+
+
+class PlannerBase:
+    """The planner contract as a template: `plan` runs the parts every planner shares, a planner
+    writes only its algorithm in `solve`.
+
+    `plan(problem)`:
+    1. takes the problem's python-fcl world (built outside the clock by the orchestrator, as
+       `prepare` builds what else depends on the world alone);
+    2. checks the endpoints (`check_endpoints`): a bad one is reported at once, with its cause;
+    3. calls `solve(problem, world, deadline)` with the deadline of the problem's budget;
+    4. names the cause of a failure `solve` left unnamed (`stats["reason_code"]`, from the status
+       where the status says it: a timeout spent its budget, an error is the planner's).
+
+    A subclass sets `name`, `Config` (a frozen dataclass) and optionally `solver` (stats' name
+    for what it runs), and overrides `solve` and, when it has world-only set-up, `prepare`.
+    """
+
+    name: ClassVar[str]
+    Config: ClassVar[type]
+    solver: ClassVar[str | None] = None
+
+    def __init__(self, config: Any = None) -> None:
+        from scenes.errors import SuiteError
+
+        config = self.Config() if config is None else config
+        if not isinstance(config, self.Config):
+            raise SuiteError(f"planner {self.name!r} takes a {self.Config.__name__}, got {type(config).__name__}")
+        self.config = config
+
+    def prepare(self, problem: PlanningProblem) -> None:
+        """Build what depends on the problem's world only (a Drake diagram, regions, a program):
+        the orchestrator calls it before it starts the clock. Nothing by default."""
+
+    def plan(self, problem: PlanningProblem) -> PlanResult:
+        """The shared steps around `solve` (see the class docstring); never raises for a problem
+        it cannot solve."""
+        import time
+
+        from planners.worlds import collision_world
+
+        world = collision_world(problem)
+        bad = check_endpoints(problem, world)
+        if bad is not None:
+            return PlanResult(bad.status, None, {**bad.stats, **({"solver": self.solver} if self.solver else {})})
+        result = self.solve(problem, world, time.perf_counter() + float(problem.time_limit_s))
+        cause = _STATUS_CAUSE.get(PlanStatus(result.status))
+        if result.status is not PlanStatus.SUCCESS and "reason_code" not in result.stats and cause is not None:
+            result = PlanResult(result.status, result.path, {**result.stats, "reason_code": cause.value})
+        return result
+
+    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
+        """The algorithm: a path from `problem.q_start` to `problem.q_goal` (both checked valid),
+        within `deadline` (`time.perf_counter()` seconds). Failures name their cause in
+        `stats["reason_code"]` (`FailureReason`)."""
+        raise NotImplementedError
 
 
 def check_endpoints(problem: PlanningProblem, world) -> PlanResult | None:

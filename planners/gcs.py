@@ -32,10 +32,10 @@ from typing import ClassVar
 
 import numpy as np
 
-from planners.base import FailureReason, PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
 from planners.gcs_regions import RegionOptions, RegionSet, problem_hash, regions_for
 from planners.gcs_solve import SOLVERS, checked_path
-from planners.worlds import collision_world, remember
+from planners.worlds import remember
 from scenes.errors import SuiteError
 
 log = logging.getLogger(__name__)
@@ -87,14 +87,14 @@ class GcsConfig(RegionOptions):
         return RegionOptions(**{k: v for k, v in dataclasses.asdict(self).items() if k in names})
 
 
-class GcsPlanner:
+class GcsPlanner(PlannerBase):
     """Shortest paths through cached IRIS regions with Drake's GcsTrajectoryOptimization."""
 
     name: ClassVar[str] = "gcs"
     Config: ClassVar[type] = GcsConfig
 
     def __init__(self, config: GcsConfig | None = None) -> None:
-        self.config = config or GcsConfig()
+        super().__init__(config)
         self._regions: dict[tuple, tuple[RegionSet | None, dict]] = {}
 
     def _key(self, problem: PlanningProblem) -> tuple:
@@ -111,11 +111,7 @@ class GcsPlanner:
         info["prepare_s"] = time.perf_counter() - t0
         remember(self._regions, key, (rs, info), max_items=16)
 
-    def plan(self, problem: PlanningProblem) -> PlanResult:
-        world = collision_world(problem)
-        bad = check_endpoints(problem, world)
-        if bad is not None:
-            return bad
+    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
         cfg = self.config
         key = self._key(problem)
         if key not in self._regions:  # called without prepare (e.g. directly): regions are still offline cost

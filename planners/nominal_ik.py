@@ -50,9 +50,9 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import PiecewisePose
 
 from planners.drake_queries import EvaluationCounter, query_stats
-from planners.base import FailureReason, PROBLEM_KINDS, PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.base import PROBLEM_KINDS, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
 from scenes.errors import SuiteError
-from planners.worlds import collision_world, drake_plan_scene, remember
+from planners.worlds import drake_plan_scene, remember
 
 log = logging.getLogger(__name__)
 
@@ -183,14 +183,14 @@ def _problem_seed(problem: PlanningProblem) -> list[int]:
     return [int(problem.seed) & 0xFFFFFFFF, PROBLEM_KINDS.index(problem.kind), int(problem.can_id) & 0xFFFFFFFF]
 
 
-class NominalIkPlanner:
+class NominalIkPlanner(PlannerBase):
     """The paper's method: IK knot by knot along the nominal gripper trajectory."""
 
     name: ClassVar[str] = "ik"
     Config: ClassVar[type] = NominalIkConfig
 
     def __init__(self, config: NominalIkConfig | None = None) -> None:
-        self.config = config or NominalIkConfig()
+        super().__init__(config)
         self._programs: dict[tuple, _KnotProgram] = {}
 
     def _program(self, problem: PlanningProblem) -> _KnotProgram:
@@ -210,21 +210,17 @@ class NominalIkPlanner:
         return (kind in _NEAR_KINDS or (kind == "approach" and t >= t1 - w - 1e-9)
                 or (kind == "lift" and t <= t0 + w + 1e-9))
 
-    def plan(self, problem: PlanningProblem) -> PlanResult:
+    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
         """`_plan`, with its Drake distance queries counted and timed (`planners.drake_queries`)."""
         program = self._program(problem)
         calls0 = program.evaluations.calls
         program.evaluations.restart()
-        result = self._plan(problem)
+        result = self._plan(problem, world)
         queries = program.evaluations.calls - calls0  # the iterates are q itself, one binding
         result.stats.update(query_stats(queries, program.distance[False], program.evaluations.sample))
         return result
 
-    def _plan(self, problem: PlanningProblem) -> PlanResult:
-        world = collision_world(problem)
-        bad = check_endpoints(problem, world)
-        if bad is not None:
-            return bad
+    def _plan(self, problem: PlanningProblem, world) -> PlanResult:
         cfg = self.config
         t_start = time.perf_counter()
         wp_t = np.array([w.t for w in problem.waypoints], float)

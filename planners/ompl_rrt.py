@@ -23,7 +23,7 @@ import numpy as np
 from ompl import base as ob
 from ompl import geometric as og
 
-from planners.base import FailureReason, PlanningProblem, PlanResult, PlanStatus, check_endpoints, snapped_to_ends
+from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, snapped_to_ends
 from planners.ompl_adapter import (
     OmplProblem,
     drop_collinear,
@@ -32,7 +32,6 @@ from planners.ompl_adapter import (
     set_ompl_log_level,
     trial_seed,
 )
-from planners.worlds import collision_world
 from scenes.errors import SuiteError
 
 log = logging.getLogger(__name__)
@@ -171,7 +170,7 @@ def _progress_point(op, t_solve: float) -> list:
     return [round(time.perf_counter() - t_solve, 6), cost]
 
 
-class _OmplPlanner:
+class _OmplPlanner(PlannerBase):
     """One OMPL geometric planner on the problem's python-fcl world (see the module docstring)."""
 
     name: ClassVar[str]
@@ -184,12 +183,6 @@ class _OmplPlanner:
     #: whether solve() may be called again to carry on (AORRTC crashes on a second call)
     resumable: ClassVar[bool] = True
 
-    def __init__(self, config: OmplConfig | None = None) -> None:
-        config = self.Config() if config is None else config
-        if not isinstance(config, self.Config):
-            raise SuiteError(f"planner {self.name!r} takes a {self.Config.__name__}, got {type(config).__name__}")
-        self.config = config
-
     # subclasses: the OMPL planner object
     def _make(self, si: ob.SpaceInformation) -> ob.Planner:
         raise NotImplementedError
@@ -197,24 +190,19 @@ class _OmplPlanner:
     def _planner_stats(self, planner) -> dict[str, Any]:
         return {}
 
-    def plan(self, problem: PlanningProblem) -> PlanResult:
-        """Plan a collision-free joint path from `problem.q_start` to `problem.q_goal`.
+    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
+        """Plan a collision-free joint path from `problem.q_start` to `problem.q_goal` (both
+        checked valid by `PlannerBase.plan`).
 
         Returns:
-            SUCCESS with the (N, 7) path (rad) from q_start to q_goal exactly; INVALID_START /
-            INVALID_GOAL / IK_FAILED at once for bad endpoints; TIMEOUT if the budget ran out
-            without an exact solution; NO_SOLUTION if the planner stopped without one.
+            SUCCESS with the (N, 7) path (rad) from q_start to q_goal exactly; TIMEOUT if the
+            budget ran out without an exact solution; NO_SOLUTION if the planner stopped without one.
         """
         cfg = self.config
         set_ompl_log_level(cfg.verbose)
-        world = collision_world(problem)
         checks0, query0 = world.checks, world.query_s
-        bad = check_endpoints(problem, world)
-        if bad is not None:
-            return PlanResult(bad.status, None, {**bad.stats, "solver": self.solver,
-                                                  "collision_checks": world.checks - checks0})
         t0 = time.perf_counter()
-        budget_s = cfg.time_limit_s if cfg.time_limit_s is not None else float(problem.time_limit_s)
+        budget_s = cfg.time_limit_s if cfg.time_limit_s is not None else deadline - t0
         seed = trial_seed(problem)
         result = self._attempt(problem, world, resolution_rad=cfg.resolution_rad, budget_s=budget_s, seed=seed)
         fine = cfg.validate_resolution_rad

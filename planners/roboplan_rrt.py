@@ -31,7 +31,7 @@ import numpy as np
 import roboplan.core as rpc
 import roboplan.rrt as rpr
 
-from planners.base import FailureReason, PlanningProblem, PlanResult, PlanStatus, check_endpoints, snapped_to_ends
+from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, snapped_to_ends
 from planners.ompl_adapter import trial_seed
 from planners.roboplan_scene import RoboplanWorld, build_roboplan_world
 from planners.worlds import collision_world, remember
@@ -125,18 +125,12 @@ def edge_checks(nodes, step_rad: float) -> int:
     return int(np.maximum(1, np.ceil(d / step_rad)).sum())
 
 
-class RoboplanRRTPlanner:
+class RoboplanRRTPlanner(PlannerBase):
     """roboplan's RRT-Connect on the suite's model of the problem (see the module docstring)."""
 
     name: ClassVar[str] = "roboplan-rrt"
     Config: ClassVar[type] = RoboplanRRTConfig
     solver: ClassVar[str] = "roboplan.RRTConnect"
-
-    def __init__(self, config: RoboplanRRTConfig | None = None) -> None:
-        config = self.Config() if config is None else config
-        if not isinstance(config, self.Config):
-            raise SuiteError(f"planner {self.name!r} takes a {self.Config.__name__}, got {type(config).__name__}")
-        self.config = config
 
     def prepare(self, problem: PlanningProblem) -> None:
         """Build (or fetch) roboplan's scene of the problem's world, outside the clock."""
@@ -156,23 +150,18 @@ class RoboplanRRTPlanner:
             fast_return=True,
         )
 
-    def plan(self, problem: PlanningProblem) -> PlanResult:
-        """Plan with roboplan's RRT-Connect from `problem.q_start` to `problem.q_goal`.
+    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
+        """Plan with roboplan's RRT-Connect from `problem.q_start` to `problem.q_goal` (both
+        checked valid by the python-fcl world in `PlannerBase.plan`, as for every planner).
 
         Returns:
-            SUCCESS with the (N, 7) path (rad); INVALID_START / INVALID_GOAL / IK_FAILED at once
-            for bad endpoints (checked by the python-fcl world, as for every planner); TIMEOUT
-            when roboplan runs out of time; NO_SOLUTION when it hits its node cap; ERROR for any
-            other failure roboplan reports.
+            SUCCESS with the (N, 7) path (rad); TIMEOUT when roboplan runs out of time;
+            NO_SOLUTION when it hits its node cap; ERROR for any other failure roboplan reports.
         """
         cfg = self.config
         t0 = time.perf_counter()
         rw, check_s = roboplan_world(problem)
-        world = collision_world(problem)
-        bad = check_endpoints(problem, world)
-        if bad is not None:
-            return PlanResult(bad.status, None, {**bad.stats, "solver": self.solver})
-        budget_s = cfg.time_limit_s if cfg.time_limit_s is not None else float(problem.time_limit_s)
+        budget_s = cfg.time_limit_s if cfg.time_limit_s is not None else deadline - t0
         search_s = budget_s - (time.perf_counter() - t0) - (cfg.shortcut_reserve_s if cfg.shortcut else 0.0)
         seed = trial_seed(problem)
         stats: dict[str, Any] = {"solver": self.solver, "seed": seed, "range_rad": cfg.range_rad,

@@ -33,10 +33,10 @@ from pydrake.planning import KinematicTrajectoryOptimization
 from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import BsplineTrajectory
 
-from planners.base import FailureReason, PlanningProblem, PlanResult, PlanStatus, check_endpoints
+from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
 from planners.drake_queries import EvaluationCounter, query_stats
 from scenes.errors import SuiteError
-from planners.worlds import collision_world, drake_plan_scene, remember
+from planners.worlds import drake_plan_scene, remember
 
 log = logging.getLogger(__name__)
 
@@ -147,14 +147,14 @@ def _stretches(s_bad: np.ndarray, per_hit: int, gap: float) -> list[float]:
     return out
 
 
-class TrajoptPlanner:
+class TrajoptPlanner(PlannerBase):
     """Drake's KinematicTrajectoryOptimization with dense python-fcl re-checks."""
 
     name: ClassVar[str] = "trajopt"
     Config: ClassVar[type] = TrajoptConfig
 
     def __init__(self, config: TrajoptConfig | None = None) -> None:
-        self.config = config or TrajoptConfig()
+        super().__init__(config)
         self._contexts: dict[tuple, tuple] = {}
 
     def _plant(self, problem: PlanningProblem):
@@ -209,14 +209,9 @@ class TrajoptPlanner:
             at.append(traj.value(samples[k % len(samples)]).ravel())
         return query_stats(queries, distance, np.array(at), num_derivatives=self.config.spline_order * cps.shape[0])
 
-    def plan(self, problem: PlanningProblem) -> PlanResult:
-        world = collision_world(problem)
-        bad = check_endpoints(problem, world)
-        if bad is not None:
-            return bad
+    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
         cfg = self.config
         t0 = time.perf_counter()
-        deadline = t0 + problem.time_limit_s
         ds, _, plant_context = self._plant(problem)
         plant = ds.plant
         q_start = np.asarray(problem.q_start, float)
