@@ -177,13 +177,21 @@ class PlannerBase:
     4. names the cause of a failure `solve` left unnamed (`stats["reason_code"]`, from the status
        where the status says it: a timeout spent its budget, an error is the planner's).
 
-    A subclass sets `name`, `Config` (a frozen dataclass) and optionally `solver` (stats' name
-    for what it runs), and overrides `solve` and, when it has world-only set-up, `prepare`.
+    A subclass sets `name`, `Config` (a frozen dataclass), optionally `solver` (stats' name for
+    what it runs) and its tuning (`search_space`, `tuning_objective`), and overrides `solve` and,
+    when it has world-only set-up, `prepare`.
     """
 
     name: ClassVar[str]
     Config: ClassVar[type]
     solver: ClassVar[str | None] = None
+    #: `suite tune`'s search, next to the settings it searches: each setting's candidate values,
+    #: the class default first (the grid is their product; small, so a tuning fits a session)
+    search_space: ClassVar[dict[str, tuple]] = {}
+    #: what the tuning weighs once success is settled: "time" (a feasibility planner: median time
+    #: to solve, failures at the budget) or "length" (an optimizing planner: median length over
+    #: the best known, on the problems every candidate solved)
+    tuning_objective: ClassVar[str] = "time"
 
     def __init__(self, config: Any = None) -> None:
         from scenes.errors import SuiteError

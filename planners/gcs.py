@@ -92,6 +92,8 @@ class GcsPlanner(PlannerBase):
 
     name: ClassVar[str] = "gcs"
     Config: ClassVar[type] = GcsConfig
+    search_space: ClassVar[dict[str, tuple]] = {"order": (1, 3), "max_rounded_paths": (5, 10)}
+    tuning_objective: ClassVar[str] = "length"
 
     def __init__(self, config: GcsConfig | None = None) -> None:
         super().__init__(config)

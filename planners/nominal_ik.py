@@ -188,6 +188,9 @@ class NominalIkPlanner(PlannerBase):
 
     name: ClassVar[str] = "ik"
     Config: ClassVar[type] = NominalIkConfig
+    search_space: ClassVar[dict[str, tuple]] = {
+        "knot_dt_tu": (0.5, 0.25), "position_tolerance_transit_m": (0.05, 0.1),
+        "orientation_tolerance_transit_rad": (0.3, 0.6)}
 
     def __init__(self, config: NominalIkConfig | None = None) -> None:
         super().__init__(config)

@@ -332,6 +332,8 @@ class RRTConnectPlanner(_OmplPlanner):
     Config = RRTConnectConfig
     solver = "RRTConnect"
     optimizing = False
+    # None: OMPL's own range (a fifth of the space's extent, about 2.8 rad here), and steps around it
+    search_space = {"range_rad": (None, 2.0, 1.0, 0.5), "simplifier": ("rope", "rope+full")}
 
     def _make(self, si):
         p = og.RRTConnect(si)
@@ -346,6 +348,8 @@ class RRTstarPlanner(_OmplPlanner):
     name = "rrtstar"
     Config = RRTstarConfig
     solver = "RRTstar"
+    search_space = {"range_rad": (None, 1.0, 0.5, 0.25), "goal_bias": (0.05, 0.2)}
+    tuning_objective = "length"
 
     def _make(self, si):
         p = og.RRTstar(si)
@@ -366,6 +370,8 @@ class BITstarPlanner(_OmplPlanner):
     Config = BITstarConfig
     solver = "BITstar"
     graph_stats = False
+    search_space = {"samples_per_batch": (100, 400), "range_rad": (None, 1.0)}
+    tuning_objective = "length"
 
     def _make(self, si):
         p = og.BITstar(si)
@@ -386,6 +392,8 @@ class AORRTCPlanner(_OmplPlanner):
     solver = "AORRTC"
     graph_stats = False
     resumable = False
+    search_space = {"range_rad": (None, 1.0, 0.5)}
+    tuning_objective = "length"
 
     def _attempt(self, problem, world, *, resolution_rad, budget_s, seed):
         # OMPL 2.0.1's AORRTC reports a failure ("Zero-length path found") when its trees connect
@@ -409,6 +417,8 @@ class PRMPlanner(_OmplPlanner):
     name = "prm"
     Config = PRMConfig
     solver = "PRM"
+    search_space = {"max_nearest_neighbors": (10, 20), "range_rad": (None, 1.0)}
+    tuning_objective = "length"
 
     def _make(self, si):
         p = og.PRM(si)

@@ -152,6 +152,10 @@ class TrajoptPlanner(PlannerBase):
 
     name: ClassVar[str] = "trajopt"
     Config: ClassVar[type] = TrajoptConfig
+    search_space: ClassVar[dict[str, tuple]] = {
+        "num_control_points": (10, 16), "num_collision_samples": (15, 30),
+        "initial_guess": ("straight", "via_waypoints")}
+    tuning_objective: ClassVar[str] = "length"
 
     def __init__(self, config: TrajoptConfig | None = None) -> None:
         super().__init__(config)

@@ -1,5 +1,6 @@
 """Tuned planner settings: what `python -m suite tune` chose on a dataset's tuning split, and the
-small documented search each planner's settings are chosen from.
+small documented search each planner's settings are chosen from (declared on the planner's class,
+next to its config: `search_space`, `tuning_objective`).
 
 `planners/configs/NAME.yaml` holds a planner's chosen `settings` and the `table` of every
 candidate's results that justified them. A planner built without explicit settings starts from
@@ -18,34 +19,19 @@ from scenes.errors import SuiteError
 
 CONFIGS_DIR = Path(__file__).resolve().parent / "configs"
 
-#: What each planner is tuned for once success is settled: "time" (a feasibility planner:
-#: median time to solve, failures at the budget) or "length" (an optimizing planner: median length
-#: over the best known path, on the problems every candidate solved).
-OBJECTIVE: dict[str, str] = {
-    "ik": "time", "rrt": "time", "roboplan-rrt": "time",
-    "rrtstar": "length", "bitstar": "length", "aorrtc": "length", "prm": "length",
-    "trajopt": "length", "gcs": "length",
-}
+def search_space(planner: str) -> dict[str, tuple]:
+    """The planner's tuning search (its class's `search_space`; {} for a planner without one)."""
+    from planners.registry import planner_class
 
-#: The search: each setting's candidate values (the grid is their product). Small on purpose: a
-#: tuning run must fit a session on 2 cores; the first value of each is the class default.
-SEARCH_SPACES: dict[str, dict[str, tuple]] = {
-    # None: OMPL's own range (a fifth of the space's extent, about 2.8 rad here), and steps around it
-    "rrt": {"range_rad": (None, 2.0, 1.0, 0.5), "simplifier": ("rope", "rope+full")},
-    # roboplan's own max connection distance (3.0) first, steps around it, and rrt's 1.0; always
-    # shortcut, as rrt always simplifies (unshortcut paths return sooner but are 1.4 to 5.6 times
-    # the reference length on the tune split, and the time objective alone would choose them)
-    "roboplan-rrt": {"range_rad": (3.0, 2.0, 1.0, 0.5)},
-    "rrtstar": {"range_rad": (None, 1.0, 0.5, 0.25), "goal_bias": (0.05, 0.2)},
-    "bitstar": {"samples_per_batch": (100, 400), "range_rad": (None, 1.0)},
-    "aorrtc": {"range_rad": (None, 1.0, 0.5)},
-    "prm": {"max_nearest_neighbors": (10, 20), "range_rad": (None, 1.0)},
-    "trajopt": {"num_control_points": (10, 16), "num_collision_samples": (15, 30),
-                "initial_guess": ("straight", "via_waypoints")},
-    "ik": {"knot_dt_tu": (0.5, 0.25), "position_tolerance_transit_m": (0.05, 0.1),
-           "orientation_tolerance_transit_rad": (0.3, 0.6)},
-    "gcs": {"order": (1, 3), "max_rounded_paths": (5, 10)},
-}
+    return dict(getattr(planner_class(planner), "search_space", {}) or {})
+
+
+def objective(planner: str) -> str:
+    """What the planner is tuned for once success is settled: "time" or "length" (its class's
+    `tuning_objective`; "time" for a planner that does not say)."""
+    from planners.registry import planner_class
+
+    return str(getattr(planner_class(planner), "tuning_objective", "time"))
 
 
 def config_path(planner: str) -> Path:

@@ -65,7 +65,8 @@ def _factors(text: str) -> list[float]:
 
 def run(args: argparse.Namespace) -> int:
     from planners.registry import planner_class
-    from planners.tuned import OBJECTIVE, read_tuned
+    from planners.tuned import objective as tuning_objective
+    from planners.tuned import read_tuned
     from scenes.errors import SuiteError
     from suite.cli.tune import _candidate_dir, grid, tuning_problems
     from suite.report.tuning import choose, evaluate
@@ -84,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         raise SuiteError(f"planner {args.planner!r} has no tuned file to read the dataset and budget from; "
                          "give --dataset and --budget")
     tune_dir = Path(args.tune_dir or Path("results") / "tune" / args.planner)
-    objective = OBJECTIVE.get(args.planner, "time")
+    objective = tuning_objective(args.planner)
     candidates = grid(args.planner)
     _, problems = tuning_problems(dataset, per_family=per_family, time_limit_s=float(budget))
     base: list[tuple[dict, list[dict]]] = []

@@ -1,6 +1,6 @@
 """`python -m suite tune --planner NAME`: choose a planner's settings on a dataset's tuning split.
 
-Every candidate of the planner's documented search (`planners.tuned.SEARCH_SPACES`, class defaults
+Every candidate of the planner's documented search (its class's `search_space`, class defaults
 first) runs on the same non-trivial problems of the dataset's `tune` split (all of them, or up
 to `--per-family` per family, the lowest problem ids: a fixed, content-defined sample), through the
 ordinary trial machinery (validation, TOPP-RA, metrics). The rule of `suite.report.tuning` picks
@@ -40,11 +40,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def grid(planner: str) -> list[dict]:
     """Every candidate of the planner's search, class defaults first."""
-    from planners.tuned import SEARCH_SPACES
+    from planners.registry import known_planners
+    from planners.tuned import search_space
 
-    space = SEARCH_SPACES.get(planner)
+    space = search_space(planner)
     if not space:
-        raise SuiteError(f"planner {planner!r} has no tuning search; planners with one: {', '.join(sorted(SEARCH_SPACES))}")
+        with_one = []
+        for name in sorted(known_planners()):
+            try:
+                if search_space(name):
+                    with_one.append(name)
+            except (ImportError, SuiteError):  # an optional planner not installed
+                continue
+        raise SuiteError(f"planner {planner!r} has no tuning search; planners with one: {', '.join(with_one)}")
     names = list(space)
     return [dict(zip(names, values)) for values in itertools.product(*(space[n] for n in names))]
 
@@ -102,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _tune(args: argparse.Namespace, out: Path) -> int:
     from planners.registry import planner_class
-    from planners.tuned import OBJECTIVE, config_path
+    from planners.tuned import config_path, objective as tuning_objective
     from suite.report.tuning import RULE, WEIGHTINGS, choose, evaluate, table_rows, weak_families
     from suite.run.records import read_trials
     from suite.run.runner import run_trials
@@ -126,7 +134,7 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
         wanted = {t.trial_id for t in trials}
         evaluated.append((settings, [r for r in read_trials(run_dir) if r["trial_id"] in wanted]))
     results = evaluate(evaluated)
-    objective = OBJECTIVE.get(args.planner, "time")
+    objective = tuning_objective(args.planner)
     chosen = choose(results, objective=objective, weighting="family")
     pooled = choose(results, objective=objective, weighting="pooled")
     rows = table_rows(results, chosen=chosen, pooled=pooled)

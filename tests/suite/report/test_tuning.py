@@ -8,7 +8,8 @@ import math
 import pytest
 
 from planners.registry import planner_class
-from planners.tuned import OBJECTIVE, SEARCH_SPACES, tuned_settings
+from planners.registry import BUILTIN
+from planners.tuned import objective, search_space, tuned_settings
 from scenes.errors import SuiteError
 from suite.cli.tune import grid, tuning_problems
 from suite.report.tuning import CandidateResult, choose, evaluate, weak_families
@@ -16,7 +17,7 @@ from suite.run.trial import make_config
 from tests.suite.report.test_summary import record
 
 
-@pytest.mark.parametrize("planner", sorted(SEARCH_SPACES))
+@pytest.mark.parametrize("planner", sorted(BUILTIN))
 def test_every_search_starts_at_the_class_defaults(planner):
     try:
         cls = planner_class(planner)
@@ -25,12 +26,13 @@ def test_every_search_starts_at_the_class_defaults(planner):
     except SuiteError as exc:  # a search for a planner this installation does not register
         pytest.skip(str(exc))
     defaults = {f.name: f.default for f in dataclasses.fields(cls.Config)}
-    space = SEARCH_SPACES[planner]
+    space = search_space(planner)
+    assert space, f"{planner}: every shipped planner declares its search next to its config"
     assert set(space) <= set(defaults), f"{planner}: unknown settings in its search"
     assert {k: v[0] for k, v in space.items()} == {k: defaults[k] for k in space}
     assert grid(planner)[0] == {k: v[0] for k, v in space.items()}
     assert len(grid(planner)) == math.prod(len(v) for v in space.values()) <= 8  # small, as documented
-    assert OBJECTIVE[planner] in ("time", "length")
+    assert objective(planner) in ("time", "length")
 
 
 def _result(solved, time_s, ratio, by_family=None):
@@ -159,3 +161,27 @@ def test_evaluate_gives_each_family_one_vote():
     assert sorted(a.by_family) == ["open", "window"]
     assert a.family_solved_mean == pytest.approx(0.5)  # 3/3 on one family, 0/1 on the other
     assert a.family_time_to_solve_median_s == pytest.approx((0.1 + 5.0) / 2)
+
+
+def test_a_planner_from_anywhere_is_tuned_by_the_search_it_declares(monkeypatch):
+    """`suite tune` reads a planner's search from its class, so a planner from an entry point
+    is tuned like a built-in one."""
+    from planners import registry
+    from planners.base import PlannerBase
+
+    @dataclasses.dataclass(frozen=True)
+    class StepConfig:
+        step: float = 0.1
+        greedy: bool = False
+
+    class StepPlanner(PlannerBase):
+        name = "step"
+        Config = StepConfig
+        search_space = {"step": (0.1, 0.2), "greedy": (False, True)}
+        tuning_objective = "length"
+
+    real = registry.planner_class
+    monkeypatch.setattr(registry, "planner_class", lambda name: StepPlanner if name == "step" else real(name))
+    assert grid("step") == [{"step": 0.1, "greedy": False}, {"step": 0.1, "greedy": True},
+                            {"step": 0.2, "greedy": False}, {"step": 0.2, "greedy": True}]
+    assert objective("step") == "length"
