@@ -153,11 +153,43 @@ def peers_table(root: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+PERCEPTION_RUNS = Path("results") / "perception"
+
+
+def perception_table(root: Path) -> str:
+    """docs/perception.md: every committed evaluation (`perceive --evaluate --json`), one row each."""
+    lines = ["| segmentation | depth noise (mm) | scenes (seeds) | cans | recall | precision | xy error, median / p95 (mm) "
+             "| yaw error of lying cans, median / p95 (°) | upright / lying right | grasps on distractors |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    runs = []
+    for path in sorted((root / PERCEPTION_RUNS).glob("*.json")):
+        d = json.loads(path.read_text(encoding="utf-8"))
+        runs.append((d["segmentation"], float(d["depth_noise_m"]), d))
+    for seg, noise, d in sorted(runs, key=lambda x: (x[0] != "color", x[0], x[1])):
+        e = d["evaluation"]
+        seeds = d.get("seeds") or []
+        span = f"{e['scenes']} ({seeds[0]}-{seeds[-1]})" if seeds else str(e["scenes"])
+        found = e.get("detections", 0) > 0  # precision and pose accuracy say nothing without detections
+
+        def pair(a, b, scale=1.0):
+            va, vb = e.get(a), e.get(b)
+            ok = isinstance(va, (int, float)) and va == va
+            return f"{scale * va:.2f} / {scale * vb:.2f}" if ok else "-"
+        lines.append(f"| {seg} | {1000 * noise:g} | {span} | {e['cans']} | {e['recall']:.3f} | "
+                     f"{e['precision']:.3f} | " if found else f"| {seg} | {1000 * noise:g} | {span} | {e['cans']} | "
+                     f"{e['recall']:.3f} | - | ")
+        lines[-1] += (f"{pair('xy_error_median_mm', 'xy_error_p95_mm')} | {pair('yaw_error_median_deg', 'yaw_error_p95_deg')} | "
+                      f"{e['kind_accuracy']:.3f} | " if found else "- | - | - | ") + \
+            f"{e['distractor_grasps']} of {e['distractors']} distractors |"
+    return "\n".join(lines) + "\n"
+
+
 #: block name -> (page, how it is written)
 BLOCKS: dict[str, tuple[str, Callable[[Path], str]]] = {
     "answer-table": ("README.md", answer_table),
     "tuned-settings": ("docs/planners.md", tuned_settings_table),
     "recycle-v3-composition": ("docs/datasets.md", dataset_composition),
+    "perception-table": ("docs/perception.md", perception_table),
 }
 
 
