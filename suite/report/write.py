@@ -51,15 +51,18 @@ def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, 
     from suite.report.summary_stats import paired_comparisons, summarize_run
 
     executions = read_execution(run_dir)
+    drawing = None
+    if plots:  # the figures start first, most of them in a second process, while the tables are written
+        from suite.report.plots import start_plots
+
+        drawing = start_plots(run_dir, records=records, executions=executions, budget_records=budget_records)
     summary = summarize_run(records, planners=planners)
     pairs = paired_comparisons(records, rng=np.random.default_rng(seed), planners=planners)
     written = write_summary(run_dir, records, planners=planners, seed=seed, executions=executions,
                             budget_records=budget_records, summary=summary, pairs=pairs)
     written += write_arena_logs(run_dir, records=records)
-    if plots:
-        from suite.report.plots import make_plots
-
-        written += make_plots(run_dir, records=records, executions=executions, budget_records=budget_records)
+    if drawing is not None:
+        written += drawing.finish()
     if html:
         from suite.report.html import write_html
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from synthetic_runs import synthetic_records, write_run
 
-from suite.report.plots import make_plots
+from suite.report import plots as plots_module
+from suite.report.plots import make_plots, start_plots
 from suite.report.plots_common import BUILTIN_COLORS, planner_colors
 from suite.report.plots_paths import densify_joint_path
 
@@ -37,6 +38,28 @@ def test_make_plots_writes_every_figure(run_dir):
         w, h = _png_size(p)
         assert w > 400 and h > 300, p.name
         assert p.stat().st_size > 20_000, p.name  # a drawn figure, not an empty canvas
+
+
+def test_figures_drawn_partly_in_a_second_process_are_the_same_files_in_order(run_dir):
+    alone = [p.name for p in make_plots(run_dir)]
+    sizes = {p.name: p.stat().st_size for p in (run_dir / "plots").iterdir()}
+    drawing = start_plots(run_dir, background=0.6)
+    assert drawing.proc is not None  # Linux: forked
+    shared = drawing.finish()
+    assert [p.name for p in shared] == alone
+    assert all(abs(p.stat().st_size - sizes[p.name]) < 0.02 * sizes[p.name] for p in shared)
+
+
+def test_a_failing_second_process_leaves_its_figures_to_the_first(run_dir, monkeypatch):
+    def broken(conn, jobs):
+        conn.send(("error", "RuntimeError: no display"))
+        conn.close()
+
+    monkeypatch.setattr(plots_module, "_draw_into", broken)
+    for p in (run_dir / "plots").iterdir():
+        p.unlink()
+    written = start_plots(run_dir, background=0.6).finish()
+    assert len(written) == 9 and all(p.is_file() for p in written)
 
 
 def test_make_plots_without_any_success(tmp_path):
