@@ -190,6 +190,7 @@ BLOCKS: dict[str, tuple[str, Callable[[Path], str]]] = {
     "tuned-settings": ("docs/planners.md", tuned_settings_table),
     "recycle-v3-composition": ("docs/datasets.md", dataset_composition),
     "perception-table": ("docs/perception.md", perception_table),
+    "peers-table": ("README.md", peers_table),
 }
 
 
