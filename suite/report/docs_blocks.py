@@ -184,6 +184,33 @@ def perception_table(root: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+PEERS_EQUAL_RUNS = Path("results") / "peers-equal"
+
+
+def peers_equal_table(root: Path) -> str:
+    """docs/peers.md: `rrt` and `roboplan-rrt` at the same range, one committed run per range."""
+    lines = ["| range (rad) | planner | solved | time to solve, median (s) | queries (median) | µs a query | query share |",
+             "|---|---|---|---|---|---|---|"]
+    runs = []
+    for d in sorted((root / PEERS_EQUAL_RUNS).iterdir()) if (root / PEERS_EQUAL_RUNS).is_dir() else []:
+        manifest = json.loads((d / "manifest.json").read_text(encoding="utf-8"))
+        summary = json.loads((d / "summary.json").read_text(encoding="utf-8"))
+        ranges = {p: c.get("range_rad") for p, c in (manifest["config"].get("planner_configs") or {}).items()}
+        runs.append((min(r for r in ranges.values() if r is not None), summary))
+    for rng, summary in sorted(runs, key=lambda x: x[0]):
+        for name, p in summary["planners"].items():
+            att = p.get("attribution") or {}
+            lower = "roboplan" in str(att.get("engine", ""))
+            at_least = "at least " if lower else ""
+            q, spq, share = att.get("queries"), att.get("s_per_query"), att.get("query_share")
+            lines.append(f"| {rng:g} | `{name}` | {p['success']['k']}/{p['success']['n']} | "
+                         f"{p['time_to_solve_s']['median']:.2f} | "
+                         + ("-" if q is None else f"{at_least}{q:,.0f}") + " | "
+                         + ("-" if spq is None else f"{1e6 * spq:.1f}") + " | "
+                         + ("-" if share is None else f"{at_least}{100 * share:.0f}%") + " |")
+    return "\n".join(lines) + "\n"
+
+
 #: block name -> (page, how it is written)
 BLOCKS: dict[str, tuple[str, Callable[[Path], str]]] = {
     "answer-table": ("README.md", answer_table),
@@ -191,6 +218,7 @@ BLOCKS: dict[str, tuple[str, Callable[[Path], str]]] = {
     "recycle-v3-composition": ("docs/datasets.md", dataset_composition),
     "perception-table": ("docs/perception.md", perception_table),
     "peers-table": ("README.md", peers_table),
+    "peers-equal-table": ("docs/peers.md", peers_equal_table),
 }
 
 

@@ -22,7 +22,7 @@ def test_a_changed_figure_is_found_and_rewritten(tmp_path):
     for page in {page for page, _ in docs_blocks.BLOCKS.values()}:
         (tmp_path / page).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy(ROOT / page, tmp_path / page)
-    for sub in ("results/reference", "planners/configs", "results/perception"):
+    for sub in ("results/reference", "planners/configs", "results/perception", "results/peers", "results/peers-equal"):
         shutil.copytree(ROOT / sub, tmp_path / sub, ignore=shutil.ignore_patterns("*.jsonl", "*.html", "arena", "families"))
     readme = tmp_path / "README.md"
     text = readme.read_text(encoding="utf-8")
