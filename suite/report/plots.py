@@ -107,6 +107,11 @@ def _draw_into(conn, jobs: Sequence[tuple]) -> None:
         conn.close()
 
 
+#: How long `finish` waits for the forked process's figures before it kills it and draws them
+#: itself (a fork of a process with threads can, rarely, hang on a lock one of them held).
+DRAW_TIMEOUT_S = 300.0
+
+
 class PlotsInProgress:
     """Figures being drawn: a share of them in a forked process (started by `start_plots`), the
     rest by `finish`, which waits for the process and returns every PNG written, in order."""
@@ -119,12 +124,15 @@ class PlotsInProgress:
         theirs: list[str | None] | None = None
         if self.proc is not None:
             try:
+                if not self.conn.poll(DRAW_TIMEOUT_S):
+                    raise TimeoutError
                 status, payload = self.conn.recv()
                 theirs = payload if status == "ok" else None
                 if status != "ok":
                     log.warning("drawing figures in a second process failed (%s); drawing them here", payload)
-            except EOFError:
-                log.warning("the figure-drawing process ended without an answer; drawing its figures here")
+            except (EOFError, TimeoutError):
+                log.warning("the figure-drawing process gave no answer; drawing its figures here")
+                self.proc.kill()
             self.proc.join()
             self.conn.close()
         if theirs is None:

@@ -111,3 +111,16 @@ def test_plot_command_errors_name_the_directory(tmp_path, capsys):
     assert err == f"error: run directory {str(tmp_path / 'missing')!r} does not exist"
     assert main(["plot", str(tmp_path)]) == 2
     assert "holds no trials.jsonl" in capsys.readouterr().err
+
+
+def test_a_hanging_second_process_is_killed_and_its_figures_drawn_by_the_first(run_dir, monkeypatch):
+    import time
+
+    def hangs(conn, jobs):
+        time.sleep(60)
+
+    monkeypatch.setattr(plots_module, "_draw_into", hangs)
+    monkeypatch.setattr(plots_module, "DRAW_TIMEOUT_S", 0.5)
+    drawing = start_plots(run_dir, background=0.6)
+    written = drawing.finish()
+    assert len(written) == 9 and not drawing.proc.is_alive()
