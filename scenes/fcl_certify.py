@@ -123,7 +123,7 @@ class Certifier:
 
     def __init__(self, world) -> None:
         self.world = w = world
-        self.robot = robot = w.robot
+        self.robot = w.robot
         e = w._link_end
         n_robot = len(w._rows0)
         row_link = np.zeros(n_robot, int)
@@ -142,7 +142,7 @@ class Certifier:
         col = {int(r): c for c, r in enumerate(centres)}
         self._centres = centres
         self._centre_link = row_link[centres]
-        self._chain = np.array([point_axis_radii(robot, w._rows0[r, :3], row_link[r]) for r in centres])
+        self._chain = w._reach_chain()[centres]  # each centre's lever arms (`point_axis_radii`)
         self._moves = (np.arange(7)[None, :] < self._centre_link[:, None]).astype(float)  # joint j moves centre c
         order = np.argsort(pp, kind="stable")
         self._sp_pp = pp[order]

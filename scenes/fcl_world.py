@@ -66,7 +66,7 @@ CHUNK = 64
 
 
 #: How many samples of a motion (its end and the coarsest first) the first batched query of
-#: `motion_free` takes.
+#: `motion_samples_free` takes.
 COARSE_BATCH = 8
 
 
@@ -527,11 +527,7 @@ class CollisionWorld:
         touching = None
         unknown = None
         if len(self._tab_k):
-            x = (Qc[:, self._tab_j] - self._tab_lo) * self._tab_inv  # (M, T) cell coordinates
-            inside = (x >= 0.0) & (x < self._tab_n)
-            cell = np.where(inside, x, 0.0).astype(np.intp)
-            np.copyto(cell, self._tab_out, where=~inside)  # the UNKNOWN column
-            c = self._tab_cells.take(cell + self._tab_row0)
+            c = self._table_cells(Qc[:, self._tab_j])
             touching = (c == TOUCHING).any(axis=1)
             unknown = c == UNKNOWN
             flagged |= (c != APART).any(axis=1)
@@ -644,14 +640,9 @@ class CollisionWorld:
             if k >= 1:
                 k = int(k)
                 todo[max(i - k, 0) : i + k + 1] = False
-        todo[idx] = False
-        todo[0] = False
+        todo[idx] = False  # evaluated already (q0 among them)
         if len(self._tab_k):
-            x = (q0[self._tab_j] + (np.arange(n + 1) / n)[:, None] * d[self._tab_j] - self._tab_lo) * self._tab_inv
-            inside = (x >= 0.0) & (x < self._tab_n)
-            cell = np.where(inside, x, 0.0).astype(np.intp)
-            np.copyto(cell, self._tab_out, where=~inside)
-            c = self._tab_cells.take(cell + self._tab_row0)
+            c = self._table_cells(q0[self._tab_j] + (np.arange(n + 1) / n)[:, None] * d[self._tab_j])
             c[0] = APART  # q0 is taken as free
             if np.any(c == TOUCHING):
                 return False  # a sample where a self pair is proved in collision
@@ -667,6 +658,15 @@ class CollisionWorld:
             if not self._scan_chunk(Q[start : start + CHUNK], stop_at_first=True)[0].all():
                 return False
         return True
+
+    def _table_cells(self, qj: np.ndarray) -> np.ndarray:
+        """Every joint table's cell (M, T) for each state's value of the table's joint `qj`
+        (M, T): APART, TOUCHING, or UNKNOWN (also outside the table's range)."""
+        x = (qj - self._tab_lo) * self._tab_inv  # cell coordinates
+        inside = (x >= 0.0) & (x < self._tab_n)
+        cell = np.where(inside, x, 0.0).astype(np.intp)
+        np.copyto(cell, self._tab_out, where=~inside)  # the UNKNOWN column
+        return self._tab_cells.take(cell + self._tab_row0)
 
     def _reach_chain(self) -> np.ndarray:
         """Per world row (robot rows, then obstacle centres: 0), bounds (7,) on each joint's lever
