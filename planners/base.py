@@ -157,11 +157,16 @@ class Planner(Protocol):
     # `PlannerBase` below implements this protocol as a template: a planner then writes `solve` only.
 
 
-#: The cause a failure status names when its planner gave none (`PlannerBase.plan` fills it in).
-_STATUS_CAUSE = {
+#: The cause a failure status names by itself: a planner's status that gave no cause (filled in
+#: by `PlannerBase.plan`), and the orchestrator's statuses (`suite.run.records.reason_code`).
+STATUS_CAUSE = {
     PlanStatus.TIMEOUT: FailureReason.BUDGET_SPENT,
     PlanStatus.ERROR: FailureReason.PLANNER_ERROR,
     PlanStatus.IK_FAILED: FailureReason.NO_GOAL_IK,
+    PlanStatus.INVALID_SOLUTION: FailureReason.PATH_REJECTED,
+    PlanStatus.TIMING_FAILED: FailureReason.TIMING_FAILED,
+    PlanStatus.CRASH: FailureReason.CRASH,
+    PlanStatus.KILLED_TIMEOUT: FailureReason.KILLED,
 }
 
 
@@ -217,7 +222,7 @@ class PlannerBase:
         if bad is not None:
             return PlanResult(bad.status, None, {**bad.stats, **({"solver": self.solver} if self.solver else {})})
         result = self.solve(problem, world, time.perf_counter() + float(problem.time_limit_s))
-        cause = _STATUS_CAUSE.get(PlanStatus(result.status))
+        cause = STATUS_CAUSE.get(PlanStatus(result.status))
         if result.status is not PlanStatus.SUCCESS and "reason_code" not in result.stats and cause is not None:
             result = PlanResult(result.status, result.path, {**result.stats, "reason_code": cause.value})
         return result

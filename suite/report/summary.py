@@ -28,7 +28,13 @@ from suite.report.summary_stats import (
     paired_comparisons,
     summarize_run,
 )
-from suite.report.summary_tables import attribution_summary, certification_counts, cold_start, summary_markdown
+from suite.report.summary_tables import (
+    attribution_summary,
+    cause_counts,
+    certification_counts,
+    cold_start,
+    summary_markdown,
+)
 from suite.run.records import STATUSES, planners_in, problem_counts
 
 log = logging.getLogger(__name__)
@@ -82,12 +88,13 @@ def summary_json(
         "planners": {},
     }
     split = {"problem": summary.by_kind, "variant": summary.by_family}
+    causes = cause_counts(records)
     for g in summary.overall:
         p = g.planner
         out["planners"][p] = {
             "success": _success_json(g),
             "status_counts": g.status_counts,
-            "failure_causes": _causes(records, p),
+            "failure_causes": causes.get(p, {}),
             "certification": certification_counts(records, p),
             "attribution": attribution_summary(records, p),
             "cold_start": cold_start(records, p),
@@ -196,17 +203,3 @@ def write_summary(
     log.info("wrote %s, %s, %s, %s", md_path, json_path, csv_path, paired_path)
     return [md_path, json_path, csv_path, paired_path]
 
-
-def _causes(records, planner: str) -> dict[str, dict[str, int]]:
-    """A planner's failed trials by enumerated cause, each by family: {cause: {family: count}}."""
-    from suite.run.records import reason_code
-
-    out: dict[str, dict[str, int]] = {}
-    for r in records:
-        if r.get("planner") != planner:
-            continue
-        code = reason_code(r)
-        if code is not None:
-            fam = str(r.get("family") or r.get("variant"))
-            out.setdefault(code, {})[fam] = out.setdefault(code, {}).get(fam, 0) + 1
-    return out

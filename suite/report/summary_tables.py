@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from tabulate import tabulate
 
-from suite.report.outcomes import FEW_PROBLEMS
+from suite.report.outcomes import FEW_PROBLEMS, family_of
 from suite.report.summary_stats import (
     N_RESAMPLES,
     SUMMARY_METRICS,
@@ -280,24 +280,27 @@ def failure_reason_rows(records: Sequence[dict[str, Any]], planners: Sequence[st
     return headers, [[status, reason, *(c.get(p, 0) for p in planners)] for (status, reason), c in ordered]
 
 
-def reason_code_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
-    """Failed trials by enumerated cause (`planners.base.FailureReason`), per planner and family:
-    one row per (planner, cause), one column per family, the most frequent causes first."""
+def cause_counts(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, int]]]:
+    """Failed trials by enumerated cause (`planners.base.FailureReason`) and family:
+    {planner: {cause: {family: trials}}}."""
     from suite.run.records import reason_code
 
-    counts: dict[tuple[str, str], dict[str, int]] = {}
-    families: set[str] = set()
+    out: dict[str, dict[str, dict[str, int]]] = {}
     for r in records:
         code = reason_code(r)
-        if code is None:
-            continue
-        fam = str(r.get("family") or r.get("variant"))
-        families.add(fam)
-        row = counts.setdefault((r["planner"], code), {})
-        row[fam] = row.get(fam, 0) + 1
-    fams = sorted(families)
+        if code is not None:
+            row = out.setdefault(r["planner"], {}).setdefault(code, {})
+            row[family_of(r)] = row.get(family_of(r), 0) + 1
+    return out
+
+
+def reason_code_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+    """`cause_counts` as a table: one row per (planner, cause), one column per family, each
+    planner's most frequent causes first."""
+    counts = [((p, code), c) for p, causes in cause_counts(records).items() for code, c in causes.items()]
+    fams = sorted({f for _, c in counts for f in c})
     order = {p: i for i, p in enumerate(planners)}
-    ordered = sorted(counts.items(), key=lambda kv: (order.get(kv[0][0], len(order)), -sum(kv[1].values()), kv[0][1]))
+    ordered = sorted(counts, key=lambda kv: (order.get(kv[0][0], len(order)), -sum(kv[1].values()), kv[0][1]))
     headers = ["planner", "cause", "all", *fams]
     return headers, [[p, code, sum(c.values()), *(c.get(f, 0) for f in fams)] for (p, code), c in ordered]
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from planners.base import PlanStatus
+from planners.base import STATUS_CAUSE, FailureReason, PlanStatus
 from scenes.errors import SuiteError
 from suite.run.formats import MANIFEST_FORMAT_VERSION, RECORD_FORMAT_VERSION, check_version
 
@@ -106,29 +106,19 @@ def is_success(rec: dict[str, Any]) -> bool:
     return rec.get("status") == SUCCESS
 
 
-#: The cause a status alone names (the orchestrator's statuses, and a planner's that gives none).
-_STATUS_REASONS = {
-    "invalid_solution": "path_rejected",
-    "timing_failed": "timing_failed",
-    "crash": "crash",
-    "killed_timeout": "killed",
-    "timeout": "budget_spent",
-    "ik_failed": "no_goal_ik",
-    "error": "planner_error",
-}
-
-
 #: The free-text reasons the suite's planners wrote before they named a cause, and that cause.
 _OLD_REASONS = (
-    (("last knot", "step from the last knot"), "goal_not_reached"),
-    (("knot ",), "no_ik_at_knot"),
-    (("the regions do not connect",), "regions_disconnected"),
-    (("no regions",), "regions_missing"),
-    (("GCS failed", "the solution does not join", "solver failed"), "solver_failed"),
-    (("path still collides", "the path through the regions"), "path_still_collides"),
-    (("in collision",), "endpoint_in_collision"),
-    (("outside joint limits",), "endpoint_out_of_limits"),
+    (("last knot", "step from the last knot"), FailureReason.GOAL_NOT_REACHED),
+    (("knot ",), FailureReason.NO_IK_AT_KNOT),
+    (("the regions do not connect",), FailureReason.REGIONS_DISCONNECTED),
+    (("no regions",), FailureReason.REGIONS_MISSING),
+    (("GCS failed", "the solution does not join", "solver failed"), FailureReason.SOLVER_FAILED),
+    (("path still collides", "the path through the regions"), FailureReason.PATH_STILL_COLLIDES),
+    (("in collision",), FailureReason.ENDPOINT_IN_COLLISION),
+    (("outside joint limits",), FailureReason.ENDPOINT_OUT_OF_LIMITS),
 )
+#: The statuses only the orchestrator sets: their cause is the status's, whatever a planner said.
+_JUDGED = (PlanStatus.INVALID_SOLUTION, PlanStatus.TIMING_FAILED, PlanStatus.CRASH, PlanStatus.KILLED_TIMEOUT)
 _SAMPLERS = ("RRTConnect", "RRTstar", "BITstar", "AORRTC", "PRM", "roboplan RRT-Connect")
 
 
@@ -141,25 +131,26 @@ def reason_code(rec: dict[str, Any]) -> str | None:
     given = rec.get("reason_code")
     if given:
         return str(given)
-    status = rec.get("status")
+    try:
+        status = PlanStatus(rec.get("status"))
+    except ValueError:
+        status = None
     stats = rec.get("stats") or {}
-    if stats.get("reason") == "path_over_limit":
-        return "path_over_limit"
-    if stats.get("reason") == "out_of_memory":
-        return "out_of_memory"
-    if status == "timeout" and "late_by_s" in stats:
-        return "late_path"
-    if status in ("invalid_solution", "timing_failed", "crash", "killed_timeout"):
-        return _STATUS_REASONS[status]
+    if stats.get("reason") in (FailureReason.PATH_OVER_LIMIT.value, FailureReason.OUT_OF_MEMORY.value):
+        return str(stats["reason"])
+    if status is PlanStatus.TIMEOUT and "late_by_s" in stats:
+        return FailureReason.LATE_PATH.value
+    if status in _JUDGED:
+        return STATUS_CAUSE[status].value
     if stats.get("reason_code"):
         return str(stats["reason_code"])
     text = str(stats.get("reason") or "")
     for prefixes, code in _OLD_REASONS:  # records written before planners named their cause
         if text.startswith(prefixes):
-            return code
-    if status == "no_solution" and not text and stats.get("solver") in _SAMPLERS:
-        return "search_failed"
-    return _STATUS_REASONS.get(str(status), "not_stated")
+            return code.value
+    if status is PlanStatus.NO_SOLUTION and not text and stats.get("solver") in _SAMPLERS:
+        return FailureReason.SEARCH_FAILED.value
+    return STATUS_CAUSE.get(status, FailureReason.NOT_STATED).value
 
 
 def problem_key(rec: dict[str, Any]) -> tuple:
