@@ -142,15 +142,20 @@ def peers_table(root: Path) -> str:
             n = (fam or {}).get("success", {}).get("n", 0)
             times.append("-" if med is None else f"{med:.3g} ({k}/{n})")
         ratio = ((p.get("metrics") or {}).get("length_ratio") or {}).get("median")
-        att = p.get("attribution") or {}
-        q, spq, share = att.get("queries"), att.get("s_per_query"), att.get("query_share")
-        lower = " (at least)" if "roboplan" in str(att.get("engine", "")) else ""
-        lines.append(f"| `{name}` | {s['k']}/{s['n']} | " + " | ".join(times) + " | "
-                     + ("-" if ratio is None else f"{ratio:.2f}") + " | "
-                     + ("-" if q is None else f"{q:,.0f}{lower}") + " | "
-                     + ("-" if spq is None else f"{1e6 * spq:.1f}") + " | "
-                     + ("-" if share is None else f"{100 * share:.0f}%{lower}") + " |")
+        cells = [f"`{name}`", f"{s['k']}/{s['n']}", *times, "-" if ratio is None else f"{ratio:.2f}",
+                 *_attribution_cells(p)]
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _attribution_cells(planner_summary: dict) -> list[str]:
+    """A planner's queries (median), µs a query and query share, from its summary's attribution;
+    roboplan's counts are lower bounds, and say so."""
+    att = planner_summary.get("attribution") or {}
+    q, spq, share = att.get("queries"), att.get("s_per_query"), att.get("query_share")
+    at_least = "at least " if "roboplan" in str(att.get("engine", "")) else ""
+    return ["-" if q is None else f"{at_least}{q:,.0f}", "-" if spq is None else f"{1e6 * spq:.1f}",
+            "-" if share is None else f"{at_least}{100 * share:.0f}%"]
 
 
 PERCEPTION_RUNS = Path("results") / "perception"
@@ -171,16 +176,15 @@ def perception_table(root: Path) -> str:
         span = f"{e['scenes']} ({seeds[0]}-{seeds[-1]})" if seeds else str(e["scenes"])
         found = e.get("detections", 0) > 0  # precision and pose accuracy say nothing without detections
 
-        def pair(a, b, scale=1.0):
+        def pair(a, b):
             va, vb = e.get(a), e.get(b)
-            ok = isinstance(va, (int, float)) and va == va
-            return f"{scale * va:.2f} / {scale * vb:.2f}" if ok else "-"
-        lines.append(f"| {seg} | {1000 * noise:g} | {span} | {e['cans']} | {e['recall']:.3f} | "
-                     f"{e['precision']:.3f} | " if found else f"| {seg} | {1000 * noise:g} | {span} | {e['cans']} | "
-                     f"{e['recall']:.3f} | - | ")
-        lines[-1] += (f"{pair('xy_error_median_mm', 'xy_error_p95_mm')} | {pair('yaw_error_median_deg', 'yaw_error_p95_deg')} | "
-                      f"{e['kind_accuracy']:.3f} | " if found else "- | - | - | ") + \
-            f"{e['distractor_grasps']} of {e['distractors']} distractors |"
+            return f"{va:.2f} / {vb:.2f}" if isinstance(va, (int, float)) and va == va else "-"
+        accuracy = ([f"{e['precision']:.3f}", pair("xy_error_median_mm", "xy_error_p95_mm"),
+                     pair("yaw_error_median_deg", "yaw_error_p95_deg"), f"{e['kind_accuracy']:.3f}"]
+                    if found else ["-"] * 4)
+        cells = [seg, f"{1000 * noise:g}", span, str(e["cans"]), f"{e['recall']:.3f}", *accuracy,
+                 f"{e['distractor_grasps']} of {e['distractors']} distractors"]
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -199,15 +203,9 @@ def peers_equal_table(root: Path) -> str:
         runs.append((min(r for r in ranges.values() if r is not None), summary))
     for rng, summary in sorted(runs, key=lambda x: x[0]):
         for name, p in summary["planners"].items():
-            att = p.get("attribution") or {}
-            lower = "roboplan" in str(att.get("engine", ""))
-            at_least = "at least " if lower else ""
-            q, spq, share = att.get("queries"), att.get("s_per_query"), att.get("query_share")
-            lines.append(f"| {rng:g} | `{name}` | {p['success']['k']}/{p['success']['n']} | "
-                         f"{p['time_to_solve_s']['median']:.2f} | "
-                         + ("-" if q is None else f"{at_least}{q:,.0f}") + " | "
-                         + ("-" if spq is None else f"{1e6 * spq:.1f}") + " | "
-                         + ("-" if share is None else f"{at_least}{100 * share:.0f}%") + " |")
+            cells = [f"{rng:g}", f"`{name}`", f"{p['success']['k']}/{p['success']['n']}",
+                     f"{p['time_to_solve_s']['median']:.2f}", *_attribution_cells(p)]
+            lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
