@@ -68,13 +68,11 @@ def run(args: argparse.Namespace) -> int:
     from planners.tuned import objective as tuning_objective
     from planners.tuned import read_tuned
     from scenes.errors import SuiteError
-    from suite.cli.tune import _candidate_dir, grid, tuning_problems
+    from suite.cli.tune import _candidate_dir, candidate_trials, grid, recorded, tuning_problems
     from suite.report.tuning import choose, evaluate
-    from suite.run.records import read_trials
     from suite.run.runner import run_trials
-    from suite.run.trial import config_dict, make_config, make_trial
 
-    cls = planner_class(args.planner)
+    planner_class(args.planner)  # an unknown planner fails here, before anything is read
     factors = _factors(args.factors)
     tuned = read_tuned(args.planner) or {}
     ds_info = tuned.get("dataset") or {}
@@ -90,13 +88,11 @@ def run(args: argparse.Namespace) -> int:
     _, problems = tuning_problems(dataset, per_family=per_family, time_limit_s=float(budget))
     base: list[tuple[dict, list[dict]]] = []
     for settings in candidates:
-        config = config_dict(make_config(cls, settings, tuned=False))
-        wanted = {make_trial(p, planner=args.planner, planner_config=config, run_seed=0, meta=m).trial_id
-                  for p, m in problems}
+        trials = candidate_trials(args.planner, settings, problems, seed=0)
         d = _candidate_dir(tune_dir, settings)
-        recs = [r for r in read_trials(d) if r["trial_id"] in wanted] if (d / "trials.jsonl").is_file() else []
-        if len(recs) != len(wanted):
-            raise SuiteError(f"{d}: {len(recs)} of the {len(wanted)} trials of candidate {json.dumps(settings)} are "
+        recs = recorded(d, trials)
+        if len(recs) != len(trials):
+            raise SuiteError(f"{d}: {len(recs)} of the {len(trials)} trials of candidate {json.dumps(settings)} are "
                              f"recorded; finish the tuning first (python -m suite tune --planner {args.planner} --out {tune_dir})")
         base.append((settings, recs))
 
@@ -110,9 +106,8 @@ def run(args: argparse.Namespace) -> int:
                 continue
             late = {r["problem_id"] for r in recs if r.get("status") in TIMEOUTS}
             kept = [dict(r, time_limit_s=b) for r in recs if r["problem_id"] not in late]
-            config = config_dict(make_config(cls, settings, tuned=False))
-            trials = [make_trial(p.with_(time_limit_s=b), planner=args.planner, planner_config=config,
-                                 run_seed=0, meta=m) for p, m in problems if m["problem_id"] in late]
+            trials = candidate_trials(args.planner, settings, [(p.with_(time_limit_s=b), m) for p, m in problems
+                                                               if m["problem_id"] in late], seed=0)
             again: list[dict] = []
             if trials:
                 out = _candidate_dir(tune_dir, settings) / f"budget-{b:g}s"
@@ -120,8 +115,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{json.dumps(settings)}: planning the {len(trials)} timed-out trials again at {b:g} s",
                       file=sys.stderr)
                 run_trials(trials, out=out, jobs=args.jobs, progress_bar=not args.no_progress)
-                ids = {t.trial_id for t in trials}
-                again = [r for r in read_trials(out) if r["trial_id"] in ids]
+                again = recorded(out, trials)
             evaluated.append((settings, kept + again))
         results = evaluate(evaluated)
         chosen = choose(results, objective=objective, weighting="family")

@@ -77,6 +77,24 @@ def tuning_problems(dataset: str, *, per_family: int | None, time_limit_s: float
     return ds, chosen
 
 
+def candidate_trials(planner: str, settings: dict, problems, *, seed: int) -> list:
+    """One candidate's trials on the tuning problems [(problem, meta)]: the planner with these
+    settings over its class defaults (not over its tuned file), the run seed `seed`."""
+    from planners.registry import planner_class
+    from suite.run.trial import config_dict, make_config, make_trial
+
+    config = config_dict(make_config(planner_class(planner), settings, tuned=False))
+    return [make_trial(p, planner=planner, planner_config=config, run_seed=seed, meta=meta) for p, meta in problems]
+
+
+def recorded(run_dir: Path, trials) -> list[dict]:
+    """The records in run_dir of these trials (a candidate's directory may hold others)."""
+    from suite.run.records import read_trials
+
+    wanted = {t.trial_id for t in trials}
+    return [r for r in read_trials(run_dir) if r["trial_id"] in wanted] if (run_dir / "trials.jsonl").is_file() else []
+
+
 def _candidate_dir(out: Path, settings: dict) -> Path:
     digest = hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()[:10]
     return out / f"candidate-{digest}"
@@ -109,30 +127,24 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _tune(args: argparse.Namespace, out: Path) -> int:
-    from planners.registry import planner_class
     from planners.tuned import config_path, objective as tuning_objective
     from suite.report.tuning import RULE, WEIGHTINGS, choose, evaluate, table_rows, weak_families
-    from suite.run.records import read_trials
     from suite.run.runner import run_trials
-    from suite.run.trial import config_dict, make_config, make_trial
 
-    cls = planner_class(args.planner)
     candidates = grid(args.planner)
     ds, problems = tuning_problems(args.dataset, per_family=args.per_family, time_limit_s=args.time_limit_s)
     print(f"tuning {args.planner}: {len(candidates)} candidates x {len(problems)} non-trivial problems of "
           f"{ds.name}'s tune split ({args.time_limit_s:g} s each) into {out}", file=sys.stderr)
     evaluated = []
     for i, settings in enumerate(candidates, 1):
-        config = config_dict(make_config(cls, settings, tuned=False))
-        trials = [make_trial(p, planner=args.planner, planner_config=config, run_seed=args.seed, meta=meta)
-                  for p, meta in problems]
+        trials = candidate_trials(args.planner, settings, problems, seed=args.seed)
         run_dir = _candidate_dir(out, settings)
         run_dir.mkdir(parents=True, exist_ok=True)
-        (run_dir / "candidate.json").write_text(json.dumps({"settings": settings, "config": config}, default=str))
+        (run_dir / "candidate.json").write_text(json.dumps({"settings": settings, "config": trials[0].planner_config},
+                                                           default=str))
         print(f"[{i}/{len(candidates)}] {json.dumps(settings, default=str)}", file=sys.stderr)
         run_trials(trials, out=run_dir, jobs=args.jobs, progress_bar=not args.no_progress)
-        wanted = {t.trial_id for t in trials}
-        evaluated.append((settings, [r for r in read_trials(run_dir) if r["trial_id"] in wanted]))
+        evaluated.append((settings, recorded(run_dir, trials)))
     results = evaluate(evaluated)
     objective = tuning_objective(args.planner)
     chosen = choose(results, objective=objective, weighting="family")
