@@ -18,7 +18,6 @@ simplifier has its own RNG.)
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 from ompl import base as ob
@@ -26,7 +25,6 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from planners.base import PlanningProblem
-from scenes.fcl_world import check_order
 
 DOF = 7
 
@@ -66,15 +64,6 @@ def trial_seed(problem: PlanningProblem) -> int:
 
 
 # --- collision checking ----------------------------------------------------------------------------
-
-
-def motion_samples(q0: np.ndarray, q1: np.ndarray, resolution_rad: float) -> np.ndarray:
-    """Samples of the straight motion q0 -> q1 (q0 excluded, q1 first), at most `resolution_rad`
-    apart in every joint, in checking order."""
-    d = q1 - q0
-    n = max(1, math.ceil(float(np.max(np.abs(d))) / resolution_rad))
-    t = check_order(n) / n
-    return q0 + t[:, None] * d
 
 
 class BatchMotionValidator(ob.MotionValidator):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from planners.base import PlanStatus
-from planners.ompl_adapter import drop_collinear, motion_samples, trial_seed
+from planners.ompl_adapter import drop_collinear, trial_seed
 from planners.ompl_rrt import AORRTCConfig, RRTConnectConfig
 from planners.registry import make_planner
 from scenes.grasp_rule import truth_grasp
@@ -135,15 +135,6 @@ def test_optimizing_planner_solves_transit(transit):
     assert r.stats["solver"] == "AORRTC" and r.stats["best_cost"] > 0
     # it runs to its budget (less the simplification share), not beyond it by much
     assert r.stats["solve_time_s"] >= 0.8 * budget_s and elapsed_s < budget_s + 2.0
-
-
-def test_motion_samples_cover_the_motion_end_first():
-    q0, q1 = np.zeros(7), np.linspace(-0.3, 0.7, 7)
-    Q = motion_samples(q0, q1, 0.05)
-    assert np.array_equal(Q[0], q1)
-    steps = np.sort(Q[:, -1])  # the last joint moves most
-    assert len(Q) == 14 and np.max(np.abs(np.diff(np.vstack([q0, Q[np.argsort(Q[:, -1])]]), axis=0))) <= 0.05 + 1e-12
-    assert steps[-1] == pytest.approx(0.7)
 
 
 def test_drop_collinear_keeps_corners_only():

@@ -191,6 +191,18 @@ def test_the_planners_motion_check_answers_as_every_sample_does(variant):
     assert evaluated < 0.8 * every  # and fewer states than every sample on the free motions
 
 
+def test_a_motion_is_checked_end_first_and_its_samples_cover_it():
+    """`check_order`: the motion's samples as `motion_samples_free` takes them, the end first."""
+    q0, q1 = np.zeros(7), np.linspace(-0.3, 0.7, 7)
+    n = 14  # ceil(0.7 / 0.05): the last joint moves most
+    order = fcl_world.check_order(n)
+    Q = q0 + (order / n)[:, None] * (q1 - q0)
+    assert np.array_equal(Q[0], q1)
+    steps = np.sort(Q[:, -1])
+    assert len(Q) == 14 and np.max(np.abs(np.diff(np.vstack([q0, Q[np.argsort(Q[:, -1])]]), axis=0))) <= 0.05 + 1e-12
+    assert steps[-1] == pytest.approx(0.7)
+
+
 def test_joint_tables_are_sound():
     """Wherever a table decides a self pair without an exact query, FCL agrees: apart cells are
     apart, touching cells collide."""
