@@ -322,7 +322,7 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
         certification=certification,
         stats=_jsonable(stats),
     )
-    record["reason_code"] = reason_code({k: v for k, v in record.items() if k != "reason_code"})
+    record["reason_code"] = reason_code(record)  # a fresh record (`trial_record`): worked out, not read
     return record
 
 
