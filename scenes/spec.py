@@ -14,11 +14,11 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-import pydantic
 import yaml
 from pydantic import Field
 
 from scenes.errors import SuiteError
+from scenes.schema import FieldError, NonNeg, NonNegInt, Pos, PosInt, PosVec3, Rgba, Unit, Vec2, Vec3, load
 
 DEFAULT_SPEC_PATH = Path(__file__).parent / "specs" / "default.yaml"
 
@@ -27,9 +27,21 @@ DEFAULT_SPEC_PATH = Path(__file__).parent / "specs" / "default.yaml"
 class Box:
     """An axis-aligned box: centre and full size in metres."""
 
-    center_m: tuple[float, float, float]
-    size_m: tuple[float, float, float]
-    color_rgba: tuple[float, float, float, float]
+    center_m: Vec3
+    size_m: PosVec3
+    color_rgba: Rgba
+
+
+@dataclasses.dataclass(frozen=True)
+class Table:
+    """The table as a spec file gives it: a box whose top face is the plane z = 0."""
+
+    size_m: PosVec3
+    center_xy_m: Vec2
+    color_rgba: Rgba
+
+    def box(self) -> Box:
+        return Box((self.center_xy_m[0], self.center_xy_m[1], -self.size_m[2] / 2), self.size_m, self.color_rgba)
 
 
 #: Shapes an obstacle can have, with the meaning of its `size_m`.
@@ -50,10 +62,10 @@ class Obstacle:
     """
 
     name: str
-    shape: str
-    size_m: tuple[float, ...]
+    shape: Literal["box", "cylinder", "sphere"]
+    size_m: tuple[Pos, ...]
     X_WO: tuple[tuple[float, float, float, float], ...]
-    color_rgba: tuple[float, float, float, float]
+    color_rgba: Rgba
 
     def pose(self) -> np.ndarray:
         """X_WO as a (4, 4) array."""
@@ -85,10 +97,15 @@ def pose_tuple(X: np.ndarray) -> tuple[tuple[float, float, float, float], ...]:
 class BinSpec:
     """An open-top bin standing on the table."""
 
-    center_xy_m: tuple[float, float]
-    outer_size_m: tuple[float, float, float]
-    wall_thickness_m: float
-    color_rgba: tuple[float, float, float, float]
+    center_xy_m: Vec2
+    outer_size_m: PosVec3
+    wall_thickness_m: Pos
+    color_rgba: Rgba
+
+    def __post_init__(self):
+        inner = min(self.outer_size_m[:2])
+        if 2 * self.wall_thickness_m >= inner:
+            raise FieldError("wall_thickness_m", f"leaves no room inside the bin: allowed below half of {inner}")
 
     def boxes(self) -> dict[str, Box]:
         """The bin as five boxes (floor and four walls), keyed by part name."""
@@ -109,24 +126,24 @@ class BinSpec:
 class CanModel:
     """The can: a solid cylinder of this radius and height (metres), mass (kg) and colour."""
 
-    radius_m: float
-    height_m: float
-    mass_kg: float
-    color_rgba: tuple[float, float, float, float]
+    radius_m: Pos
+    height_m: Pos
+    mass_kg: Pos
+    color_rgba: Rgba
 
 
 @dataclasses.dataclass(frozen=True)
 class CanGenerator:
     """How cans are scattered on the plate."""
 
-    count: int
-    min_gap_m: float
-    edge_margin_m: float
-    lying_probability: float
+    count: NonNegInt
+    min_gap_m: NonNeg
+    edge_margin_m: NonNeg
+    lying_probability: Unit
     #: "random": cans anywhere apart from each other (the paper's plate); "pickable": each new can
     #: is placed where the open gripper can descend onto it past the cans already placed, so that
     #: picking in the reverse order of placement is collision-free (dense plates, `clutter`)
-    placement: str = "random"
+    placement: Literal["random", "pickable"] = "random"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -134,38 +151,46 @@ class GraspSpec:
     """The grasp rule's offsets (metres), and the padding of a carried can in every collision
     model (`held_margin_m`: execution leaves the planned path by a few millimetres)."""
 
-    top_offset_m: float
-    pregrasp_height_m: float
-    open_width_m: float
-    held_margin_m: float
+    top_offset_m: NonNeg
+    pregrasp_height_m: Pos
+    open_width_m: Pos
+    held_margin_m: NonNeg
 
 
 @dataclasses.dataclass(frozen=True)
 class Waypoints:
     """Gripper positions of the nominal cycle; the gripper points straight down at each."""
 
-    above_plate_m: tuple[float, float, float]
-    middle_m: tuple[float, float, float]
-    above_bin_m: tuple[float, float, float]
+    above_plate_m: Vec3
+    middle_m: Vec3
+    above_bin_m: Vec3
 
 
 @dataclasses.dataclass(frozen=True)
 class CameraPose:
     """A camera at `p_m` looking at `target_m` (world frame, metres)."""
 
-    p_m: tuple[float, float, float]
-    target_m: tuple[float, float, float]
+    p_m: Vec3
+    target_m: Vec3
+
+    def __post_init__(self):
+        if tuple(self.p_m) == tuple(self.target_m):
+            raise FieldError("target_m", "allowed: a target apart from p_m")
 
 
 @dataclasses.dataclass(frozen=True)
 class CameraSpec:
     """The RGB-D cameras: shared intrinsics and one pose per named camera."""
 
-    width_px: int
-    height_px: int
-    fov_y_deg: float
-    clipping_m: tuple[float, float]
-    poses: dict[str, CameraPose]
+    width_px: PosInt
+    height_px: PosInt
+    fov_y_deg: Annotated[float, Field(gt=0, lt=180)]
+    clipping_m: tuple[Pos, Pos]
+    poses: Annotated[dict[str, CameraPose], Field(min_length=1)]
+
+    def __post_init__(self):
+        if self.clipping_m[0] >= self.clipping_m[1]:
+            raise FieldError("clipping_m", "allowed: [near, far] with near < far")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -247,177 +272,6 @@ def _merge(base: dict, override: dict) -> dict:
     return out
 
 
-# The raw YAML sections as pydantic models: every field's type and bounds in one place. Numbers
-# are strict (no "3" -> 3, no true -> 1) and finite; unknown fields are refused.
-_Num = Annotated[float, Field(strict=True, allow_inf_nan=False)]
-_Pos = Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0)]
-_NonNeg = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0)]
-_Unit = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0, le=1)]
-_Vec2 = tuple[_Num, _Num]
-_Vec3 = tuple[_Num, _Num, _Num]
-_PosVec3 = tuple[_Pos, _Pos, _Pos]
-_Rgba = tuple[_Unit, _Unit, _Unit, _Unit]
-
-
-class _Section(pydantic.BaseModel):
-    model_config = pydantic.ConfigDict(extra="forbid", frozen=True)
-
-
-class _TableIn(_Section):
-    size_m: _PosVec3
-    center_xy_m: _Vec2
-    color_rgba: _Rgba
-
-
-class _BoxIn(_Section):
-    center_m: _Vec3
-    size_m: _PosVec3
-    color_rgba: _Rgba
-
-
-class _BinIn(_Section):
-    center_xy_m: _Vec2
-    outer_size_m: _PosVec3
-    wall_thickness_m: _Pos
-    color_rgba: _Rgba
-
-    @pydantic.field_validator("wall_thickness_m")
-    @classmethod
-    def _room_inside(cls, v: float, info: pydantic.ValidationInfo) -> float:
-        outer = info.data.get("outer_size_m")
-        if outer is not None and 2 * v >= min(outer[:2]):
-            raise ValueError(f"leaves no room inside the bin: allowed below half of {min(outer[:2])}")
-        return v
-
-
-class _CanIn(_Section):
-    radius_m: _Pos
-    height_m: _Pos
-    mass_kg: _Pos
-    color_rgba: _Rgba
-
-
-class _CansIn(_Section):
-    count: Annotated[int, Field(strict=True, ge=0)]
-    min_gap_m: _NonNeg
-    edge_margin_m: _NonNeg
-    lying_probability: _Unit
-    placement: Literal["random", "pickable"] = "random"
-
-
-class _GraspIn(_Section):
-    top_offset_m: _NonNeg
-    pregrasp_height_m: _Pos
-    open_width_m: _Pos
-    held_margin_m: _NonNeg
-
-
-class _WaypointsIn(_Section):
-    above_plate_m: _Vec3
-    middle_m: _Vec3
-    above_bin_m: _Vec3
-
-
-class _CameraPoseIn(_Section):
-    p_m: _Vec3
-    target_m: _Vec3
-
-    @pydantic.field_validator("target_m")
-    @classmethod
-    def _apart(cls, v, info: pydantic.ValidationInfo):
-        if info.data.get("p_m") == v:
-            raise ValueError("allowed: a target apart from p_m")
-        return v
-
-
-class _CamerasIn(_Section):
-    width_px: Annotated[int, Field(strict=True, gt=0)]
-    height_px: Annotated[int, Field(strict=True, gt=0)]
-    fov_y_deg: Annotated[float, Field(strict=True, allow_inf_nan=False, gt=0, lt=180)]
-    clipping_m: tuple[_Pos, _Pos]
-    poses: Annotated[dict[str, _CameraPoseIn], Field(min_length=1)]
-
-    @pydantic.field_validator("clipping_m")
-    @classmethod
-    def _near_far(cls, v):
-        if v[0] >= v[1]:
-            raise ValueError("allowed: [near, far] with near < far")
-        return v
-
-
-class _SpecIn(_Section):
-    table: _TableIn
-    plate: _BoxIn
-    bin: _BinIn
-    can: _CanIn
-    cans: _CansIn
-    grasp: _GraspIn
-    waypoints: _WaypointsIn
-    cameras: _CamerasIn
-    wall: _BoxIn | None = None
-
-
-def _error_line(exc: pydantic.ValidationError, data: Any, *, where: str) -> str:
-    """The first validation error as one line: the field, its value and what is allowed."""
-    import re
-
-    err = exc.errors(include_url=False)[0]
-    loc = list(err["loc"])
-    items = []
-    while loc and isinstance(loc[-1], int):  # an element of a list: name the list, show it whole
-        items.insert(0, str(loc.pop()))
-    field = ".".join(str(x) for x in loc) or "(top level)"
-    if err["type"] == "extra_forbidden":
-        return f"{where}field '{field}' is unknown; allowed: {_allowed_at(loc[:-1])}"
-    if err["type"] == "missing" and not items:
-        return f"{where}field '{field}' is missing"
-    value = _lookup(data, loc)
-    if err["type"] == "missing":
-        msg = f"item {items[-1]} is missing: the list is too short"
-    else:
-        msg = re.sub(r" or instance of \w+", "", err["msg"]).removeprefix("Value error, ")
-        msg = msg.replace("a valid tuple", "a list").replace("Tuple should", "the list should")
-        msg = msg[0].lower() + msg[1:]
-    at = f" (item {'.'.join(items)})" if items and err["type"] != "missing" else ""
-    return f"{where}field '{field}' = {value!r}{at}: {msg}"
-
-
-def _lookup(data: Any, loc: list) -> Any:
-    for key in loc:
-        if isinstance(data, dict):
-            data = data.get(key)
-        elif isinstance(data, (list, tuple)) and isinstance(key, int) and key < len(data):
-            data = data[key]
-        else:
-            return None
-    return data
-
-
-def _allowed_at(loc: list) -> list[str]:
-    """The field names allowed in the section at `loc` (names of a mapping such as
-    cameras.poses are skipped over)."""
-    import typing
-
-    model: Any = _SpecIn
-    keys = list(loc)
-    while keys:
-        key = keys.pop(0)
-        info = getattr(model, "model_fields", {}).get(key)
-        if info is None:
-            return []
-        ann = info.annotation
-        while typing.get_origin(ann) is Annotated:
-            ann = typing.get_args(ann)[0]
-        if typing.get_origin(ann) is dict:
-            ann = typing.get_args(ann)[1]
-            if keys:
-                keys.pop(0)  # the entry's name
-        model = next((a for a in (ann, *typing.get_args(ann)) if isinstance(a, type) and issubclass(a, _Section)), None)
-        if model is None:
-            return []
-    return sorted(model.model_fields)
-
-
 def parse_spec(raw: Any, *, variant: str, source: str | None = None) -> SceneSpec:
     """Build a validated `SceneSpec` from a parsed YAML mapping.
 
@@ -447,7 +301,7 @@ def parse_spec(raw: Any, *, variant: str, source: str | None = None) -> SceneSpe
         from scenes.family_ranges import parse_family
 
         fam = families[variant]
-        family = parse_family(fam, name=variant)
+        family = parse_family(fam, name=variant, where=where)
         base = fam.get("base", "open")
         if base not in variants:
             raise SuiteError(f"{where}field 'families.{variant}.base' = {base!r}: allowed: {sorted(variants)}")
@@ -462,33 +316,10 @@ def parse_spec(raw: Any, *, variant: str, source: str | None = None) -> SceneSpe
     if not isinstance(override, dict):
         raise SuiteError(f"{where}field 'variants.{variant}' must be a mapping")
     merged = _merge({k: v for k, v in raw.items() if k not in ("variants", "families")}, override)
-    try:
-        m = _SpecIn.model_validate(merged)
-    except pydantic.ValidationError as exc:
-        raise SuiteError(_error_line(exc, merged, where=where)) from None
-
-    t = m.table
-    table = Box((t.center_xy_m[0], t.center_xy_m[1], -t.size_m[2] / 2), t.size_m, t.color_rgba)
-    b = m.bin
-    c = m.can
-    g = m.cans
-    gr = m.grasp
-    w = m.waypoints
-    cam = m.cameras
-    poses = {str(name): CameraPose(p.p_m, p.target_m) for name, p in cam.poses.items()}
-    return SceneSpec(
-        variant=variant,
-        table=table,
-        plate=Box(m.plate.center_m, m.plate.size_m, m.plate.color_rgba),
-        bin=BinSpec(b.center_xy_m, b.outer_size_m, b.wall_thickness_m, b.color_rgba),
-        can=CanModel(c.radius_m, c.height_m, c.mass_kg, c.color_rgba),
-        cans=CanGenerator(g.count, g.min_gap_m, g.edge_margin_m, g.lying_probability, g.placement),
-        grasp=GraspSpec(gr.top_offset_m, gr.pregrasp_height_m, gr.open_width_m, gr.held_margin_m),
-        waypoints=Waypoints(w.above_plate_m, w.middle_m, w.above_bin_m),
-        cameras=CameraSpec(cam.width_px, cam.height_px, cam.fov_y_deg, cam.clipping_m, poses),
-        wall=None if m.wall is None else Box(m.wall.center_m, m.wall.size_m, m.wall.color_rgba),
-        family=family,
-    )
+    if isinstance(merged.get("table"), dict):  # the table as the file gives it, then as the box it is
+        merged["table"] = dataclasses.asdict(load(Table, merged["table"], where=where, at="table").box())
+    spec = load(SceneSpec, {**merged, "variant": variant}, where=where)
+    return dataclasses.replace(spec, family=family) if family is not None else spec
 
 
 def load_spec(path: str | Path | None = None, *, variant: str = "open") -> SceneSpec:
@@ -537,18 +368,11 @@ def available_variants(path: str | Path | None = None) -> list[str]:
 
 
 def spec_from_dict(data: dict[str, Any]) -> SceneSpec:
-    """A concrete SceneSpec from its `to_dict()` (as stored in datasets); validated by pydantic.
+    """A concrete SceneSpec from its `to_dict()` (as stored in datasets), validated by its schema.
 
     Raises:
         SuiteError: naming the first bad field.
     """
-    import pydantic
-
     if data.get("family") is not None:
         raise SuiteError("a stored scene spec must be a concrete station (field 'family' must be null)")
-    try:
-        return pydantic.TypeAdapter(SceneSpec).validate_python(data)
-    except pydantic.ValidationError as exc:
-        err = exc.errors(include_url=False)[0]
-        field = ".".join(str(x) for x in err["loc"])
-        raise SuiteError(f"stored scene spec field '{field}' = {err['input']!r}: {err['msg']}") from None
+    return load(SceneSpec, data, where="stored scene spec ")

@@ -14,6 +14,7 @@ import yaml
 
 from suite.cli.args import nonneg_int, positive_float, positive_int
 from scenes.errors import SuiteError
+from scenes.schema import load
 from suite.run.lock import RunLock
 from suite.run.runner import TRIALS_FILE, CompareConfig
 
@@ -91,24 +92,7 @@ def _config_file(path: str) -> dict:
     raw = raw or {}
     if not isinstance(raw, dict):
         raise SuiteError(f"--config {path!r} must be a YAML mapping of settings")
-    fields = {f.name for f in dataclasses.fields(CompareConfig)}
-    unknown = set(raw) - fields
-    if unknown:
-        raise SuiteError(f"--config {path}: unknown setting {sorted(unknown)[0]!r}; allowed: {sorted(fields)}")
-    return raw
-
-
-def _validated(values: dict, *, source: str) -> CompareConfig:
-    """The settings checked against CompareConfig's annotations: one line per bad value."""
-    import pydantic
-
-    try:
-        return pydantic.TypeAdapter(CompareConfig).validate_python(values)
-    except pydantic.ValidationError as exc:
-        err = exc.errors(include_url=False)[0]
-        field = ".".join(str(x) for x in err["loc"]) or "settings"
-        msg = err["msg"][0].lower() + err["msg"][1:]
-        raise SuiteError(f"{source}{field} = {err['input']!r}: {msg}") from None
+    return raw  # its fields are checked with the flags' (resolve_config)
 
 
 def resolve_config(args: argparse.Namespace) -> CompareConfig:
@@ -157,7 +141,7 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
                                   for b in values["budgets"])
     if isinstance(values["time_limit_s"], int) and not isinstance(values["time_limit_s"], bool):
         values["time_limit_s"] = float(values["time_limit_s"])
-    config = _validated(values, source=source)
+    config = load(CompareConfig, values, where=source)
     _check_planner_configs(config, source=source)
     if config.dataset:
         from suite.problems.dataset import check_selection
@@ -171,12 +155,8 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
 
 
 def _check_planner_configs(config: CompareConfig, *, source: str) -> None:
-    """Each planner's settings checked against its Config dataclass's annotations (strictly, and
-    only checked: the values as given go into the trials, so their ids do not change)."""
-    import typing
-
-    import pydantic
-
+    """Each planner's settings checked against its Config dataclass (only checked: the values as
+    given go into the trials, so their ids do not change)."""
     from planners.registry import planner_class
 
     for name, overrides in config.planner_configs.items():
@@ -184,21 +164,7 @@ def _check_planner_configs(config: CompareConfig, *, source: str) -> None:
             cfg_cls = planner_class(name).Config
         except SuiteError as exc:
             raise SuiteError(f"{source}planner_configs.{name}: {exc}") from None
-        hints = typing.get_type_hints(cfg_cls)
-        # only the given keys matter: every field is optional here (the dataclass has the defaults)
-        fields = {f.name: (hints[f.name], None) for f in dataclasses.fields(cfg_cls)}
-        model = pydantic.create_model(f"{name}_config", __config__=pydantic.ConfigDict(strict=True, extra="forbid"),
-                                      **fields)
-        try:
-            model.model_validate(overrides)
-        except pydantic.ValidationError as exc:
-            err = exc.errors(include_url=False)[0]
-            field = ".".join(str(x) for x in err["loc"])
-            if err["type"] == "extra_forbidden":
-                raise SuiteError(f"{source}planner_configs.{name}.{field}: unknown setting for planner {name!r}; "
-                                 f"allowed: {sorted(fields)}") from None
-            msg = err["msg"][0].lower() + err["msg"][1:]
-            raise SuiteError(f"{source}planner_configs.{name}.{field} = {err['input']!r}: {msg}") from None
+        load(cfg_cls, overrides, where=source, at=f"planner_configs.{name}")
 
 
 def _resumed_settings(out: Path, values: dict, given: dict[str, tuple[str, object]]) -> dict:

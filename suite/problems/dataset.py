@@ -22,11 +22,11 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-import pydantic
 from pydantic import Field
 
 from planners.base import PlanningProblem, TaskWaypoint
 from scenes.errors import SuiteError
+from scenes.schema import load
 from scenes.scene import CanPose, HeldCan, Scene
 from suite.problems.identity import problem_id
 
@@ -234,27 +234,18 @@ def read_manifest(directory: Path) -> dict[str, Any]:
     if isinstance(version, int) and not isinstance(version, bool) and version > FORMAT_VERSION:
         raise SuiteError(f"{path}: dataset format version {version} is newer than this suite reads (up to version "
                          f"{FORMAT_VERSION}); update the suite to read it")
-    try:
-        _ManifestIn.model_validate(manifest)
-    except pydantic.ValidationError as exc:
-        err = exc.errors(include_url=False)[0]
-        field = ".".join(str(x) for x in err["loc"])
-        if err["type"] == "missing":
-            raise SuiteError(f"{path}: field '{field}' is missing") from None
-        msg = err["msg"][0].lower() + err["msg"][1:]
-        raise SuiteError(f"{path}: field '{field}' = {err.get('input')!r}: {msg}") from None
+    load(ManifestFields, manifest, where=f"{path}: ", ignore_unknown=True)
     return manifest
 
 
-class _ManifestIn(pydantic.BaseModel):
+@dataclasses.dataclass(frozen=True)
+class ManifestFields:
     """What this suite reads from a dataset's manifest.json (other fields are kept as they are)."""
 
-    model_config = pydantic.ConfigDict(extra="allow")
-
-    name: Annotated[str, Field(strict=True, min_length=1)] | None = None
-    format_version: Annotated[int, Field(strict=True, ge=1, le=FORMAT_VERSION)] = 1
-    hash: Annotated[str, Field(strict=True, pattern=r"^[0-9a-f]{20}$")]
-    tiers: dict[str, list[Annotated[str, Field(strict=True)]]] = {}
+    hash: Annotated[str, Field(pattern=r"^[0-9a-f]{20}$")]
+    name: Annotated[str, Field(min_length=1)] | None = None
+    format_version: Annotated[int, Field(ge=1, le=FORMAT_VERSION)] = 1
+    tiers: dict[str, list[str]] = dataclasses.field(default_factory=dict)
 
 
 def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:

@@ -21,6 +21,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field
 
 from scenes.errors import SuiteError
+from scenes.schema import NonNegInt, Pos, PosInt
 from suite.problems import DEFAULT_TIER
 from suite.run.trial import TrialSpec, config_dict, make_config, make_trial, run_trial
 
@@ -42,29 +43,29 @@ class CompareConfig:
     """The settings of a comparison run (CLI flags or a YAML file).
 
     The annotations are the allowed values: `suite.cli.compare` validates every source against
-    them with pydantic before any work starts (numbers strictly: no "3" -> 3, no true -> 1).
+    them with `scenes.schema.load` before any work starts (numbers strictly: no "3" -> 3, no true -> 1).
     """
 
     planners: tuple[str, ...] = ("ik", "rrt", "trajopt")
     variant: str = "wall"
-    seed: Annotated[int, Field(ge=0, strict=True)] = 0
-    scenes: Annotated[int, Field(gt=0, strict=True)] = 4
-    cans: Annotated[int, Field(gt=0, strict=True)] = 3
+    seed: NonNegInt = 0
+    scenes: PosInt = 4
+    cans: PosInt = 3
     grasps: Literal["perceived", "truth"] = "truth"
-    time_limit_s: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)] = 5.0
-    jobs: Annotated[int, Field(gt=0, strict=True)] = 2
+    time_limit_s: Pos = 5.0
+    jobs: PosInt = 2
     spec: str | None = None
     planner_configs: dict[str, dict[str, Any]] = dataclasses.field(default_factory=dict)
     executor: Literal["local", "dask"] = "local"
     scheduler: str | None = None
-    hard_limit_grace_s: Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)] = HARD_LIMIT_GRACE_S
+    hard_limit_grace_s: Pos = HARD_LIMIT_GRACE_S
     #: a frozen dataset `NAME[:TIER]` to run instead of generated scenes (None: generate them from
     #: variant, seed, scenes, cans and grasps)
     dataset: str | None = DEFAULT_TIER
     #: each worker process's address-space cap, MiB (a trial beyond it: `crash`, `out_of_memory`)
-    memory_limit_mb: Annotated[int, Field(ge=256, strict=True)] = DEFAULT_MEMORY_LIMIT_MB
+    memory_limit_mb: Annotated[int, Field(ge=256)] = DEFAULT_MEMORY_LIMIT_MB
     #: planning budgets (s): every planner runs every problem at each (empty: time_limit_s alone)
-    budgets: tuple[Annotated[float, Field(gt=0, allow_inf_nan=False, strict=True)], ...] = ()
+    budgets: tuple[Pos, ...] = ()
 
 
 def worker_init() -> None:

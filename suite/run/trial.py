@@ -83,20 +83,13 @@ def trial_id(*, problem: PlanningProblem, planner: str, planner_config: dict) ->
 def make_config(planner_cls, overrides: dict[str, Any] | None, *, tuned: bool = True):
     """The planner's Config dataclass: its class defaults, overlaid with the settings `tune` chose
     (planners/configs/NAME.yaml, unless `tuned` is False), overlaid with `overrides`; unknown
-    fields are a SuiteError."""
+    fields, or values their schema refuses, are one SuiteError line."""
     from planners.tuned import tuned_settings
-    from scenes.errors import SuiteError
+    from scenes.schema import load
 
-    cfg_cls = planner_cls.Config
     name = getattr(planner_cls, "name", None)
     overrides = {**(tuned_settings(name) if tuned and name else {}), **(overrides or {})}
-    fields = {f.name for f in dataclasses.fields(cfg_cls)}
-    unknown = set(overrides) - fields
-    if unknown:
-        raise SuiteError(
-            f"unknown setting {sorted(unknown)[0]!r} for planner {planner_cls.name!r}; allowed: {sorted(fields)}"
-        )
-    return cfg_cls(**overrides)
+    return load(planner_cls.Config, overrides, where=f"planner {name!r} settings: ")
 
 
 def config_dict(config) -> dict[str, Any]:

@@ -244,17 +244,17 @@ def test_bad_stored_problem_line_is_one_line(tmp_path):
 
 
 @pytest.mark.parametrize("text, needle", [
-    ("jobs: two", "jobs = 'two': input should be a valid integer"),
-    ("time_limit_s: '5'", "time_limit_s = '5': input should be a valid number"),
-    ("seed: 1.5", "seed = 1.5: input should be a valid integer"),
-    ("memory_limit_mb: 10", "memory_limit_mb = 10: input should be greater than or equal to 256"),
-    ("executor: 3", "executor = 3: input should be 'local' or 'dask'"),
-    ("planner_configs: {rrt: 5}", "planner_configs.rrt = 5: input should be a valid dictionary"),
-    ("planner_configs: {rrt: {range_rad: fast}}", "planner_configs.rrt.range_rad = 'fast': input should be a valid number"),
-    ("planner_configs: {rrt: {verbose: 1}}", "planner_configs.rrt.verbose = 1: input should be a valid boolean"),
-    ("planner_configs: {rrt: {rnage_rad: 1}}", "planner_configs.rrt.rnage_rad: unknown setting for planner 'rrt'"),
+    ("jobs: two", "field 'jobs' = 'two': input should be a valid integer"),
+    ("time_limit_s: '5'", "field 'time_limit_s' = '5': input should be a valid number"),
+    ("seed: 1.5", "field 'seed' = 1.5: input should be a valid integer"),
+    ("memory_limit_mb: 10", "field 'memory_limit_mb' = 10: input should be greater than or equal to 256"),
+    ("executor: 3", "field 'executor' = 3: input should be 'local' or 'dask'"),
+    ("planner_configs: {rrt: 5}", "field 'planner_configs.rrt' = 5: input should be a valid dictionary"),
+    ("planner_configs: {rrt: {range_rad: fast}}", "field 'planner_configs.rrt.range_rad' = 'fast': input should be a valid number"),
+    ("planner_configs: {rrt: {verbose: 1}}", "field 'planner_configs.rrt.verbose' = 1: input should be a valid boolean"),
+    ("planner_configs: {rrt: {rnage_rad: 1}}", "field 'planner_configs.rrt.rnage_rad' is unknown; allowed: ["),
     ("planner_configs: {rtt: {}}", "planner_configs.rtt: unknown planner 'rtt'"),
-    ("tme_limit_s: 3", "unknown setting 'tme_limit_s'"),
+    ("tme_limit_s: 3", "field 'tme_limit_s' is unknown; allowed: ["),
     ("[1, 2]", "must be a YAML mapping"),
     ("jobs: [", "is not valid YAML"),
 ])
