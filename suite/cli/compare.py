@@ -21,6 +21,10 @@ from suite.run.runner import TRIALS_FILE, CompareConfig
 RESULTS_DIR = Path("results")
 #: Flags that describe generated scenes (they cannot be combined with --dataset).
 GENERATED_FLAGS = ("variant", "scenes", "cans", "grasps")
+#: CompareConfig's settings a flag of the same name sets as it is (--planners and --dataset are
+#: read apart: a list, and the choice between stored and generated problems).
+FLAG_SETTINGS = tuple(f.name for f in dataclasses.fields(CompareConfig)
+                      if f.name not in ("planners", "dataset", "planner_configs", "hard_limit_grace_s"))
 #: Settings of how a run executes, which a resumed run may change (its records do not depend on them).
 HOW_IT_RUNS = ("jobs", "executor", "scheduler", "memory_limit_mb")
 
@@ -108,8 +112,7 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
         values.update(from_file)
         source = f"--config {args.config}: "
         given.update({k: (f"--config {args.config} {k}", v) for k, v in from_file.items()})
-    for key in ("variant", "seed", "scenes", "cans", "grasps", "time_limit_s", "jobs", "spec", "executor", "scheduler",
-                "memory_limit_mb", "budgets"):
+    for key in FLAG_SETTINGS:
         v = getattr(args, key)
         if v is not None:
             values[key] = v

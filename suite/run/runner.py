@@ -178,22 +178,12 @@ def _generated_problems(config: CompareConfig, progress):
 
 
 def failure_record(spec: TrialSpec, status: str, message: str, wall_time_s: float) -> dict[str, Any]:
-    """The record of a trial whose worker crashed or was killed."""
-    from suite.run.formats import RECORD_FORMAT_VERSION
+    """The record of a trial whose worker crashed or was killed: what was asked (`trial_record`,
+    the one record builder) and how it ended."""
+    from suite.run.trial import failed_record
 
-    p = spec.problem
-    return {
-        "format_version": RECORD_FORMAT_VERSION,
-        "trial_id": spec.trial_id, "planner": spec.planner, "planner_config": spec.planner_config,
-        "scene_seed": p.scene.seed, "scene_key": p.scene.key(), "variant": p.scene.variant,
-        "can_id": p.can_id, "problem": p.kind, "held": p.held is not None, "seed": p.seed,
-        "time_limit_s": p.time_limit_s,
-        "q_start": None if p.q_start is None else [float(v) for v in p.q_start],
-        "q_goal": None if p.q_goal is None else [float(v) for v in p.q_goal],
-        "status": status, "planning_time_s": wall_time_s, "path": None, "metrics": {},
-        "stats": {"error": message}, "reason_code": "killed" if status == "killed_timeout" else "crash",
-        **spec.meta,
-    }
+    return failed_record(spec, status=status, wall_time_s=wall_time_s, stats={"error": message},
+                         reason_code="killed" if status == "killed_timeout" else "crash")
 
 
 NEWLINE = b"\n"

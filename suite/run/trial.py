@@ -148,11 +148,19 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
         from suite.run.executors import retire_worker
 
         retire_worker()  # a process that ran out of memory may be left in a bad state
-        record = trial_record(spec)
-        record.update(status=PlanStatus.CRASH.value, planning_time_s=time.perf_counter() - t0, path=None,
-                      metrics={}, stats={"reason": "out_of_memory", "error": f"MemoryError: {exc}"[:200],
-                                         "memory_limit_mb": _MEMORY_LIMIT_MB}, reason_code="out_of_memory")
-        return record
+        return failed_record(spec, status=PlanStatus.CRASH.value, wall_time_s=time.perf_counter() - t0,
+                             stats={"reason": "out_of_memory", "error": f"MemoryError: {exc}"[:200],
+                                    "memory_limit_mb": _MEMORY_LIMIT_MB}, reason_code="out_of_memory")
+
+
+def failed_record(spec: TrialSpec, *, status: str, wall_time_s: float, stats: dict[str, Any],
+                  reason_code: str) -> dict[str, Any]:
+    """The record of a trial that ended without a plan to judge (out of memory, a crashed or
+    killed worker): `trial_record`'s fields, then the status, its cause and the wall time."""
+    record = trial_record(spec)
+    record.update(status=status, planning_time_s=wall_time_s, path=None, metrics={}, stats=stats,
+                  reason_code=reason_code)
+    return record
 
 
 def _run_trial(spec: TrialSpec) -> dict[str, Any]:

@@ -203,3 +203,22 @@ def test_resume_refuses_a_contradicting_setting_and_appends_nothing(tiny_run, tm
     r = compare("--out", str(out), "--resume", "--jobs", "1", "--no-plots", "--no-progress")
     assert r.returncode == 0, r.stderr
     assert (out / "trials.jsonl").read_bytes() == before  # everything was already recorded
+
+
+def test_each_setting_is_listed_once_and_every_flag_setting_has_its_flag():
+    # CompareConfig is the one list of settings: the flags that set a field of the same name are
+    # derived from it, so a new setting without its flag fails here, not in a user's run
+    import argparse
+    import dataclasses
+
+    from suite.cli.compare import FLAG_SETTINGS, add_arguments, resolve_config
+    from suite.run.runner import CompareConfig
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args([])
+    assert set(FLAG_SETTINGS) <= set(vars(args))
+    assert set(FLAG_SETTINGS) <= {f.name for f in dataclasses.fields(CompareConfig)}
+    assert resolve_config(args) == CompareConfig()
+    args = parser.parse_args(["--jobs", "1", "--time-limit-s", "2.5"])
+    assert resolve_config(args) == dataclasses.replace(CompareConfig(), jobs=1, time_limit_s=2.5)
