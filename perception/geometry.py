@@ -6,6 +6,8 @@ depth is the distance along +z (not along the ray).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -38,3 +40,16 @@ def back_project_camera(depth_m: np.ndarray, *, K: np.ndarray, origin_px: tuple[
 def camera_to_world(p_C: np.ndarray, X_WC: np.ndarray) -> np.ndarray:
     """World points of camera-frame points (..., 3)."""
     return p_C @ X_WC[:3, :3].T + X_WC[:3, 3]
+
+
+def axis_yaw_tls(xy: np.ndarray) -> float:
+    """Direction of the total-least-squares line through points (N, 2), from +x, in [-pi/2, pi/2).
+
+    The principal axis of the points' covariance: it treats x and y alike, so a line parallel to y
+    is as well found as one parallel to x.
+    """
+    d = xy - xy.mean(axis=0)
+    _, vecs = np.linalg.eigh(d.T @ d)
+    a = vecs[:, -1]
+    yaw = math.atan2(a[1], a[0])
+    return (yaw + math.pi / 2) % math.pi - math.pi / 2

@@ -20,8 +20,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+from typing import NamedTuple
 
-import cv2
 import numpy as np
 
 from perception.can_discs import find_can_discs
@@ -29,15 +29,15 @@ from perception.can_model import (
     disc_core_fits,
     flat_top,
     lying_strip_fits,
-    top_bands_m,
     top_height_fits,
     upright_top_fits,
 )
 from perception.crop import crop_rgb, roi_mask, work_volume_corners_W
-from perception.geometry import back_project_camera, camera_to_world, project
+from perception.geometry import axis_yaw_tls, back_project_camera, camera_to_world, project
 from perception.normals import estimate_normals
 from perception.plane import above_plate_mask
 from perception.segment import Components, can_mask, separate
+from perception.touching import single_cans
 from scenes.grasp_rule import Grasp, make_grasp
 from scenes.render import CameraImage
 from scenes.spec import SceneSpec
@@ -218,19 +218,6 @@ def footprint_overhang_m(spec: SceneSpec, *, xy, lying: bool, axis_yaw_rad: floa
     return float(max(abs(xy[0] - cx) + half[0] - sx / 2, abs(xy[1] - cy) + half[1] - sy / 2))
 
 
-def axis_yaw_tls(xy: np.ndarray) -> float:
-    """Direction of the total-least-squares line through points (N, 2), from +x, in [-pi/2, pi/2).
-
-    The principal axis of the points' covariance: it treats x and y alike, so a line parallel to y
-    is as well found as one parallel to x.
-    """
-    d = xy - xy.mean(axis=0)
-    _, vecs = np.linalg.eigh(d.T @ d)
-    a = vecs[:, -1]
-    yaw = math.atan2(a[1], a[0])
-    return (yaw + math.pi / 2) % math.pi - math.pi / 2
-
-
 def _bbox(mask: np.ndarray, *, pad: int) -> tuple[int, int, int, int]:
     """Rows [r0, r1) and columns [c0, c1) holding all True pixels of `mask`, padded."""
     rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
@@ -272,6 +259,27 @@ def analyse_frame(image: CameraImage, spec: SceneSpec, params: PerceptionParams 
     )
 
 
+class _Top(NamedTuple):
+    """A group of vertical-normal points that may be one can's top."""
+
+    component: int
+    points: np.ndarray  # indices into the frame's points
+    upright: bool  # at an upright can's height
+    xy: np.ndarray
+    top_z: float
+
+
+class _Found(NamedTuple):
+    """A can's top that passed the can model."""
+
+    component: int
+    xy: np.ndarray
+    top_z: float
+    lying: bool
+    yaw: float
+    n_points: int
+
+
 def detect_cans(
     image: CameraImage, spec: SceneSpec, params: PerceptionParams = PerceptionParams()
 ) -> tuple[list[CanDetection], FrameAnalysis]:
@@ -292,19 +300,19 @@ def detect_cans(
     fa = analyse_frame(image, spec, params)
     r, h = spec.can.radius_m, spec.can.height_m
     top_plate = spec.plate_top_z_m
-    candidates = []  # (component, point indices, upright, xy, top z)
+    candidates: list[_Top] = []
     for k in range(1, fa.components.count + 1):
         in_comp = np.nonzero(fa.vertical & (fa.labels == k))[0]
-        for idx, upright in _single_cans(fa, in_comp, spec=spec, params=params):
+        for idx, upright in single_cans(fa, in_comp, spec=spec, params=params):
             if idx.size < params.min_vertical_points:
                 log.debug("component %d: %d vertical points, not a can", k, idx.size)
                 continue
             pts = fa.p_W[idx]
             top_z = float(np.percentile(pts[:, 2], params.top_percentile))
-            candidates.append((k, idx, upright, pts[:, :2].mean(axis=0), top_z))
-    upright_xy = np.array([c[3] for c in candidates if c[2]]).reshape(-1, 2)
-    found = []  # (component, xy, top z, lying, yaw, vertical points)
-    second_look = []  # upright groups that are no single can's top: (component, point indices, top z)
+            candidates.append(_Top(k, idx, upright, pts[:, :2].mean(axis=0), top_z))
+    upright_xy = np.array([c.xy for c in candidates if c.upright]).reshape(-1, 2)
+    found: list[_Found] = []
+    second_look: list[_Top] = []  # upright groups that are no single can's top
     for k, idx, upright, xy, top_z in candidates:
         pts = fa.p_W[idx]
         lying = not upright
@@ -323,13 +331,13 @@ def detect_cans(
                 log.warning("component %d: vertical points do not fit one can's top; no grasp for it", k)
                 continue
         elif not _single_upright_top(fa, idx, k=k, xy=xy, top_z=top_z, upright_xy=upright_xy, spec=spec, params=params):
-            second_look.append((k, idx, top_z))
+            second_look.append(_Top(k, idx, True, xy, top_z))
             continue
-        found.append((k, xy, top_z, lying, yaw, idx.size))
+        found.append(_Found(k, xy, top_z, lying, yaw, idx.size))
     # Upright groups that are no single can's top (merged with a touching top at the same height,
     # partly hidden): look for can discs in them, away from the cans found so far.
-    for k, idx, top_z in second_look:
-        taken = np.array([f[1] for f in found if not f[3]]).reshape(-1, 2)
+    for k, idx, _, _, top_z in second_look:
+        taken = np.array([f.xy for f in found if not f.lying]).reshape(-1, 2)
         discs = find_can_discs(image, fa.components.labels, k, core_rc=fa.rc[idx], top_z_m=top_z, taken_xy=taken,
                                spec=spec, tolerance_m=params.flat_top_tolerance_m,
                                rim_tolerance_px=params.rim_tolerance_px, min_inner_fraction=params.min_rim_fraction,
@@ -340,7 +348,7 @@ def detect_cans(
             log.info("component %d: no can's top disc in a flat top at a can's height; no grasp for it", k)
         for xy, n in discs:
             if _on_plate(spec, params, k=k, xy=xy, lying=False, yaw=0.0):
-                found.append((k, xy, top_z, False, 0.0, n))
+                found.append(_Found(k, xy, top_z, False, 0.0, n))
     out: list[CanDetection] = []
     for k, xy, top_z, lying, yaw, n in found:
         det_id = len(out)
@@ -397,83 +405,3 @@ def _on_plate(spec: SceneSpec, params: PerceptionParams, *, k: int, xy, lying: b
         log.info("component %d: footprint %.1f mm beyond the plate edge, not a can on the plate", k, overhang * 1e3)
         return False
     return True
-
-
-_CLOSE_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))
-
-
-def _single_cans(
-    fa: FrameAnalysis, idx: np.ndarray, *, spec: SceneSpec, params: PerceptionParams
-) -> list[tuple[np.ndarray, bool]]:
-    """Split one component's vertical points into groups that each belong to one can, each with
-    whether it is at an upright can's height.
-
-    With the paper's gap between cans every component is one can and this returns it whole.
-    Touching cans merge into one component; their tops still come apart: an upright can's top
-    disc and a lying can's top strip lie at different heights; two lying cans' strips are
-    separated by the crease where their sides meet (no vertical normals there), unless they touch
-    end to end, when the strip's length says how many they are; two upright cans' discs touch at
-    most at a point, so their combined area says how many they are. k-means splits them (the
-    discs, and the strips in line, are convex and disjoint). Points in neither can top's height
-    band (`can_model.top_bands_m`, e.g. a bottle's top) belong to no can.
-    """
-    if idx.size == 0:
-        return []
-    groups = []
-    z = fa.p_W[idx, 2] - spec.plate_top_z_m
-    (lying_lo, lying_hi), (upright_lo, upright_hi) = top_bands_m(spec)
-    high = (z >= upright_lo) & (z <= upright_hi)
-    low = (z >= lying_lo) & (z < lying_hi) & ~high
-    shape = fa.image.depth_m.shape
-    for part, upright in ((idx[high], True), (idx[low], False)):
-        if part.size == 0:
-            continue
-        img = np.zeros(shape, np.uint8)
-        img[fa.rc[part, 0], fa.rc[part, 1]] = 1
-        # Closing fills the holes a noisy depth leaves among the vertical normals (it cannot
-        # bridge the crease between two lying cans, which is several can radii of pixels wide).
-        img = cv2.morphologyEx(img, cv2.MORPH_CLOSE, _CLOSE_KERNEL)
-        n, lab = cv2.connectedComponents(img, connectivity=8)
-        labels = lab[fa.rc[part, 0], fa.rc[part, 1]]
-        for j in range(1, n):
-            g = part[labels == j]
-            if g.size < params.min_vertical_points:
-                continue
-            if upright:
-                # Each pixel covers (depth / f)^2 of the top face; one eroded disc covers
-                # pi (r - erosion)^2.
-                f = fa.image.K[0, 0]
-                depth_m = float(np.median((fa.p_W[g] - fa.image.X_WC[:3, 3]) @ fa.image.X_WC[:3, 2]))
-                area = float(np.count_nonzero(lab == j)) * (depth_m / f) ** 2
-                erosion_m = params.erode_px * depth_m / f
-                disc = math.pi * max(spec.can.radius_m - erosion_m, 0.5 * spec.can.radius_m) ** 2
-                count = max(1, int(round(area / disc)))
-            else:
-                # Lying cans touching end to end (axes in line) have one long strip: a can's strip
-                # is at most h long, so its length says how many they are.
-                xy = fa.p_W[g, :2]
-                a = axis_yaw_tls(xy)
-                length = float(np.ptp(xy @ np.array([math.cos(a), math.sin(a)])))
-                count = max(1, int(round(length / spec.can.height_m)))
-            if count > 1:
-                lab_k = _kmeans(fa.p_W[g, :2], count)
-                groups.extend((g[lab_k == c], upright) for c in range(count))
-                continue
-            groups.append((g, upright))
-    return groups
-
-
-def _kmeans(xy: np.ndarray, k: int, iterations: int = 20) -> np.ndarray:
-    """Labels (N,) of k-means on points (N, 2), started deterministically from farthest points."""
-    centres = [xy[np.argmax(np.linalg.norm(xy - xy.mean(axis=0), axis=1))]]
-    while len(centres) < k:
-        d = np.min(np.linalg.norm(xy[:, None, :] - np.array(centres)[None], axis=-1), axis=1)
-        centres.append(xy[np.argmax(d)])
-    c = np.array(centres)
-    for _ in range(iterations):
-        lab = np.argmin(np.linalg.norm(xy[:, None, :] - c[None], axis=-1), axis=1)
-        new = np.array([xy[lab == j].mean(axis=0) if np.any(lab == j) else c[j] for j in range(k)])
-        if np.allclose(new, c):
-            break
-        c = new
-    return lab
