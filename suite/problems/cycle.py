@@ -87,6 +87,34 @@ class _IkCache:
         return self.solvers[key]
 
 
+@dataclasses.dataclass
+class _Poser:
+    """The IK of one scene's task poses: every solve draws from one generator, in task order, so
+    the goals are deterministic given the seed."""
+
+    ik: _IkCache
+    rng: np.random.Generator
+    full: IkOptions
+    near_only: IkOptions
+    warm_bin: IkOptions
+
+    def solve(self, X, q_seed, *, opening, held=None, removed=(), options=None):
+        return self.ik.solver(opening=opening, held=held, removed=removed).solve(
+            X, q_seed=q_seed, rng=self.rng, options=options or self.full)
+
+    def solve_via(self, poses, q_seed, *, opening, held=None, removed=()):
+        """IK of the last pose, reached by continuation along the earlier ones: each is solved
+        from the previous solution with near seeds only (no random restarts), so the goal stays
+        on the arm's branch along the task path. An intermediate pose without a nearby solution
+        is skipped."""
+        solver = self.ik.solver(opening=opening, held=held, removed=removed)
+        q_ = q_seed
+        for X in poses[:-1]:
+            q_next = solver.solve(X, q_seed=q_, rng=self.rng, options=self.near_only)
+            q_ = q_ if q_next is None else q_next
+        return solver.solve(poses[-1], q_seed=q_, rng=self.rng, options=self.full)
+
+
 def build_problems(
     scene: Scene,
     grasps: list[Grasp],
@@ -108,8 +136,9 @@ def build_problems(
         bin_warm_start: solve each cycle's bin goal first from the previous cycle's (the same
             gripper pose with another can in the hand), before the continuation along the task
             path; in `window` every continuation step towards the window fails and the goal falls
-            back to restarts (about 40% of generating such a scene). A dataset built without it
-            (recycle-v1, recycle-v2) records so, and is posed again without it.
+            back to restarts (about 40% of generating such a scene). recycle-v3 is built with it;
+            a dataset built without it (recycle-v1, recycle-v2) records so, and is posed again
+            without it (`suite.run.build_dataset.pose_settings`).
         goal_clearance_m: the IK's least distance to the scene at every posed configuration.
 
     Returns:
@@ -118,93 +147,89 @@ def build_problems(
     """
     spec = scene.spec
     wp = spec.waypoints
-    X_plate, X_middle, X_bin = (waypoint_pose(p) for p in (wp.above_plate_m, wp.middle_m, wp.above_bin_m))
-    ik = _IkCache(scene)
-    opening = spec.grasp.open_width_m
-    removed: tuple[int, ...] = ()
-    rng = np.random.default_rng([seed, 7919])
-
+    X_plate = waypoint_pose(wp.above_plate_m)
     clear = {"min_distance_m": goal_clearance_m}
-    full, near_only, warm_bin = (dataclasses.replace(o, **clear) for o in (IkOptions(), NEAR_ONLY, WARM_BIN))
-
-    def solve(X, q_seed, *, opening, held=None, removed=(), options=full):
-        return ik.solver(opening=opening, held=held, removed=removed).solve(X, q_seed=q_seed, rng=rng,
-                                                                            options=options)
-
-    def solve_via(poses, q_seed, *, opening, held=None, removed=()):
-        """IK of the last pose, reached by continuation along the earlier ones: each is solved
-        from the previous solution with near seeds only (no random restarts), so the goal stays
-        on the arm's branch along the task path. An intermediate pose without a nearby solution
-        is skipped."""
-        solver = ik.solver(opening=opening, held=held, removed=removed)
-        q_ = q_seed
-        for X in poses[:-1]:
-            q_next = solver.solve(X, q_seed=q_, rng=rng, options=near_only)
-            q_ = q_ if q_next is None else q_next
-        return solver.solve(poses[-1], q_seed=q_, rng=rng, options=full)
-
-    q_plate = solve(X_plate, Q_READY, opening=opening)
+    poser = _Poser(_IkCache(scene), np.random.default_rng([seed, 7919]),
+                   *(dataclasses.replace(o, **clear) for o in (IkOptions(), NEAR_ONLY, WARM_BIN)))
+    q_plate = poser.solve(X_plate, Q_READY, opening=spec.grasp.open_width_m)
     if q_plate is None:
         from scenes.errors import SuiteError
 
         raise SuiteError("no collision-free IK solution for the 'above the plate' waypoint of this scene")
     q = q_plate if q_home is None else np.asarray(q_home, float)
     q_bin_before = None
+    removed: tuple[int, ...] = ()
     problems: list[PlanningProblem] = []
     for grasp in grasps:
-        truth = match_truth(scene.without_cans(removed), grasp)
-        can_id = truth.id if truth is not None else -1 - grasp.can_id
-        X_start = X_plate
-        q_pre = solve_via([*between(X_start, grasp.X_WGpre, 2), grasp.X_WGpre], q, opening=opening, removed=removed)
-        q_grasp = (solve_via([*between(grasp.X_WGpre, grasp.X_WG, 2), grasp.X_WG], q_pre, opening=opening,
-                             removed=removed) if q_pre is not None else None)
-        held = HeldCan.from_grasp(truth, grasp.X_WG) if truth is not None and q_grasp is not None else None
-        closed = 2 * spec.can.radius_m
-        q_lift = None
-        if held is not None:
-            q_lift = solve(X_plate, q_plate, opening=closed, held=held, removed=removed)
-        removed_after = removed + ((truth.id,) if truth is not None else ())
-        # Goals away from their start are reached by continuation along the task path (above the
-        # plate -> pre-grasp; above the plate -> middle -> above the bin): seeded straight from the
-        # start, the nearby seeds failed on some layouts (over the wall, at large wrist turns) and a
-        # random restart landed on a flipped elbow or wrist that no motion along the path reaches.
-        q_bin = None
-        if q_lift is not None and bin_warm_start and q_bin_before is not None:
-            q_bin = solve(X_bin, q_bin_before, opening=closed, held=held, removed=removed_after, options=warm_bin)
-        if q_lift is not None and q_bin is None:
-            via = [*between(X_plate, X_middle, 2), X_middle, *between(X_middle, X_bin, 2), X_bin]
-            q_bin = solve_via(via, q_lift, opening=closed, held=held, removed=removed_after)
-        q_back = q_plate
-
-        def make(kind, q0, q1, X_goal, poses, *, held_=None, opening_=opening, removed_=removed):
-            t0, t1 = SCHEDULE[kind]
-            times = np.linspace(t0, t1, len(poses))
-            return PlanningProblem(
-                kind=kind, scene=scene, can_id=can_id,
-                q_start=np.full(7, np.nan) if q0 is None else np.asarray(q0, float),
-                q_goal=None if q1 is None else np.asarray(q1, float),
-                X_WG_goal=X_goal,
-                waypoints=tuple(TaskWaypoint(float(t), X) for t, X in zip(times, poses)),
-                held=held_, gripper_opening_m=opening_, removed_can_ids=tuple(removed_),
-                time_limit_s=time_limit_s, seed=seed,
-                pre_status=None if (q0 is not None and q1 is not None) else PlanStatus.IK_FAILED,
-            )
-
-        chain = [
-            make("approach", q, q_pre, grasp.X_WGpre, [X_start, grasp.X_WGpre]),
-            make("descend", q_pre, q_grasp, grasp.X_WG, [grasp.X_WGpre, grasp.X_WG]),
-            make("lift", q_grasp, q_lift, X_plate, [grasp.X_WG, X_plate], held_=held, opening_=closed),
-            make("transit", q_lift, q_bin, X_bin, [X_plate, X_middle, X_bin], held_=held, opening_=closed,
-                 removed_=removed_after),
-            make("return", q_bin, q_back, X_plate, [X_bin, X_middle, X_plate], removed_=removed_after),
-        ]
+        chain, q_bin, removed_after = _cycle(poser, scene, grasp, q=q, q_plate=q_plate, removed=removed,
+                                             q_bin_before=q_bin_before if bin_warm_start else None,
+                                             time_limit_s=time_limit_s, seed=seed)
         problems += chain
         # The next cycle starts above the plate; a can counts as gone once its cycle is posable.
         if q_bin is not None:
             removed = removed_after
             q_bin_before = q_bin
-        q = q_back
+        q = q_plate
     return problems
+
+
+def _cycle(poser: _Poser, scene: Scene, grasp: Grasp, *, q: np.ndarray, q_plate: np.ndarray,
+           removed: tuple[int, ...], q_bin_before: np.ndarray | None, time_limit_s: float,
+           seed: int) -> tuple[list[PlanningProblem], np.ndarray | None, tuple[int, ...]]:
+    """One can's five problems from `q` (above the plate), its bin goal, and the cans gone after it.
+    `q_bin_before` (the previous cycle's bin goal, or None) warm-starts the bin goal."""
+    spec = scene.spec
+    wp = spec.waypoints
+    X_plate, X_middle, X_bin = (waypoint_pose(p) for p in (wp.above_plate_m, wp.middle_m, wp.above_bin_m))
+    opening = spec.grasp.open_width_m
+    truth = match_truth(scene.without_cans(removed), grasp)
+    can_id = truth.id if truth is not None else -1 - grasp.can_id
+    X_start = X_plate
+    q_pre = poser.solve_via([*between(X_start, grasp.X_WGpre, 2), grasp.X_WGpre], q, opening=opening,
+                            removed=removed)
+    q_grasp = (poser.solve_via([*between(grasp.X_WGpre, grasp.X_WG, 2), grasp.X_WG], q_pre, opening=opening,
+                               removed=removed) if q_pre is not None else None)
+    held = HeldCan.from_grasp(truth, grasp.X_WG) if truth is not None and q_grasp is not None else None
+    closed = 2 * spec.can.radius_m
+    q_lift = None
+    if held is not None:
+        q_lift = poser.solve(X_plate, q_plate, opening=closed, held=held, removed=removed)
+    removed_after = removed + ((truth.id,) if truth is not None else ())
+    # Goals away from their start are reached by continuation along the task path (above the
+    # plate -> pre-grasp; above the plate -> middle -> above the bin): seeded straight from the
+    # start, the nearby seeds failed on some layouts (over the wall, at large wrist turns) and a
+    # random restart landed on a flipped elbow or wrist that no motion along the path reaches.
+    q_bin = None
+    if q_lift is not None and q_bin_before is not None:
+        q_bin = poser.solve(X_bin, q_bin_before, opening=closed, held=held, removed=removed_after,
+                            options=poser.warm_bin)
+    if q_lift is not None and q_bin is None:
+        via = [*between(X_plate, X_middle, 2), X_middle, *between(X_middle, X_bin, 2), X_bin]
+        q_bin = poser.solve_via(via, q_lift, opening=closed, held=held, removed=removed_after)
+
+    def make(kind, q0, q1, X_goal, poses, *, held_=None, opening_=opening, removed_=removed):
+        t0, t1 = SCHEDULE[kind]
+        times = np.linspace(t0, t1, len(poses))
+        return PlanningProblem(
+            kind=kind, scene=scene, can_id=can_id,
+            q_start=np.full(7, np.nan) if q0 is None else np.asarray(q0, float),
+            q_goal=None if q1 is None else np.asarray(q1, float),
+            X_WG_goal=X_goal,
+            waypoints=tuple(TaskWaypoint(float(t), X) for t, X in zip(times, poses)),
+            held=held_, gripper_opening_m=opening_, removed_can_ids=tuple(removed_),
+            time_limit_s=time_limit_s, seed=seed,
+            pre_status=None if (q0 is not None and q1 is not None) else PlanStatus.IK_FAILED,
+        )
+
+    chain = [
+        make("approach", q, q_pre, grasp.X_WGpre, [X_start, grasp.X_WGpre]),
+        make("descend", q_pre, q_grasp, grasp.X_WG, [grasp.X_WGpre, grasp.X_WG]),
+        make("lift", q_grasp, q_lift, X_plate, [grasp.X_WG, X_plate], held_=held, opening_=closed),
+        make("transit", q_lift, q_bin, X_bin, [X_plate, X_middle, X_bin], held_=held, opening_=closed,
+             removed_=removed_after),
+        make("return", q_bin, q_plate, X_plate, [X_bin, X_middle, X_plate], removed_=removed_after),
+    ]
+    return chain, q_bin, removed_after
 
 
 def benchmark_cycles(
