@@ -8,36 +8,36 @@ crease between lying cans, and k-means on the count the tops' area or length giv
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Any
 
 import cv2
 import numpy as np
 
 from perception.can_model import top_bands_m
 from perception.geometry import axis_yaw_tls
-
-if TYPE_CHECKING:
-    from perception.grasps import FrameAnalysis, PerceptionParams
-    from scenes.spec import SceneSpec
+from scenes.spec import SceneSpec
 
 
 _CLOSE_KERNEL = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))
 
 
 def single_cans(
-    fa: "FrameAnalysis", idx: np.ndarray, *, spec: "SceneSpec", params: "PerceptionParams"
+    fa: Any, idx: np.ndarray, *, spec: SceneSpec, params: Any
 ) -> list[tuple[np.ndarray, bool]]:
     """Split one component's vertical points into groups that each belong to one can, each with
     whether it is at an upright can's height.
 
     With the paper's gap between cans every component is one can and this returns it whole.
-    Touching cans merge into one component; their tops still come apart: an upright can's top
-    disc and a lying can's top strip lie at different heights; two lying cans' strips are
-    separated by the crease where their sides meet (no vertical normals there), unless they touch
-    end to end, when the strip's length says how many they are; two upright cans' discs touch at
-    most at a point, so their combined area says how many they are. k-means splits them (the
-    discs, and the strips in line, are convex and disjoint). Points in neither can top's height
-    band (`can_model.top_bands_m`, e.g. a bottle's top) belong to no can.
+    Touching cans merge into one component; their tops still come apart: an upright can's top disc
+    and a lying can's top strip lie at different heights; two lying cans' strips are separated by
+    the crease where their sides meet (no vertical normals there), unless they touch end to end,
+    when the strip's length says how many they are; two upright cans' discs touch at most at a
+    point, so their combined area says how many they are. k-means splits them (the discs, and the
+    strips in line, are convex and disjoint). Points in neither can top's height band
+    (`can_model.top_bands_m`, e.g. a bottle's top) belong to no can.
+
+    `fa` is the frame's `perception.grasps.FrameAnalysis` and `params` its `PerceptionParams`
+    (not imported: `perception.grasps` imports this module).
     """
     if idx.size == 0:
         return []
