@@ -169,8 +169,8 @@ def test_placement_shortcuts_give_the_plain_answers():
     import fcl
 
     from scenes.fcl_shapes import fcl_geometry
-    from scenes.generate import (_clear_of_extras, _far_enough, _footprint_bounds, _footprint_corners,
-                                 _footprint_distance, _gripper_clear, _gripper_parts, _sample_can)
+    from scenes.placement import (_clear_of_extras, _far_enough, _footprint_bounds, _footprint_corners,
+                                 _footprint_distance, gripper_clear, _gripper_parts, _sample_can)
     from scenes.grasp_rule import truth_grasp
     from scenes.scene import Scene
 
@@ -211,7 +211,7 @@ def test_placement_shortcuts_give_the_plain_answers():
         clear = _clear_of_extras(can, spec)
         assert clear == plain_clear_of_extras(can)
         others = cans[k + 1:k + 4]
-        free = _gripper_clear(can, others, spec)
+        free = gripper_clear(can, others, spec)
         assert free == plain_gripper_clear(can, others)
         outcomes.add((clear, free))
     assert len(outcomes) >= 3  # both answers of both checks occurred

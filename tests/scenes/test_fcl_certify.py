@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from scenes.fcl_certify import CERTIFIED, COLLISION, UNPROVED, certifier, point_axis_radii
-from scenes.fcl_shapes import G_INDEX
 from scenes.fcl_world import CollisionWorld
 from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp

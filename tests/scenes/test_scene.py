@@ -7,7 +7,8 @@ import sys
 import numpy as np
 import pytest
 
-from scenes.generate import _footprint_distance, capacity_bound, generate_scene
+from scenes.generate import generate_scene
+from scenes.placement import _footprint_distance, capacity_bound
 from scenes.spec import load_spec
 from scenes.errors import SuiteError
 
