@@ -8,7 +8,7 @@ import fcl
 import numpy as np
 import pytest
 
-from scenes import fcl_shapes, fcl_tables, fcl_world
+from scenes import fcl_build, fcl_motion, fcl_shapes, fcl_tables
 from scenes.fcl_world import CollisionWorld
 from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp
@@ -195,7 +195,7 @@ def test_a_motion_is_checked_end_first_and_its_samples_cover_it():
     """`check_order`: the motion's samples as `motion_samples_free` takes them, the end first."""
     q0, q1 = np.zeros(7), np.linspace(-0.3, 0.7, 7)
     n = 14  # ceil(0.7 / 0.05): the last joint moves most
-    order = fcl_world.check_order(n)
+    order = fcl_motion.check_order(n)
     Q = q0 + (order / n)[:, None] * (q1 - q0)
     assert np.array_equal(Q[0], q1)
     steps = np.sort(Q[:, -1])
@@ -232,7 +232,7 @@ def test_joint_tables_are_sound():
 @pytest.mark.parametrize("kind,dims", [("box", (0.146, 0.0725, 0.05)), ("box", (0.012, 0.082, 0.02)),
                                        ("capsule", (0.095, 0.2155)), ("cylinder", (0.065, 0.05)),
                                        ("cylinder", (0.033, 0.122)), ("sphere", (0.05,))])
-@pytest.mark.parametrize("spacing", [fcl_world.ENV_SPACING, fcl_world.SELF_SPACING])
+@pytest.mark.parametrize("spacing", [fcl_build.ENV_SPACING, fcl_build.SELF_SPACING])
 def test_cover_spheres_enclose_and_inner_balls_lie_inside(kind, dims, spacing):
     centres, outer, inner = fcl_shapes.cover_spheres(kind, dims, spacing)
     rng = np.random.default_rng(104)
