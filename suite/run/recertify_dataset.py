@@ -2,7 +2,7 @@
 
 `python -m suite dataset recertify --from NAME --name NEW` gives each benchmark reference of NAME
 its exact verdict (`suite.scoring.validate.certify_path`). A reference that is not certified is
-planned again as a build plans one (`build_dataset.reference_job`: AORRTC and RRT-Connect runs,
+planned again as a build plans one (`suite.run.references.reference_job`: AORRTC and RRT-Connect runs,
 shortened, validated, and accepted only if certified); the shortest certified path replaces it and
 the old one is recorded beside it (`reference.replaces`). A problem none of them solves is left
 out, and counted. Everything else (scenes, problems, splits, tiers, the build's settings, `gcs`'s
@@ -51,7 +51,8 @@ def _verdicts(records: list[dict], scenes: dict, *, progress_bar: bool) -> dict[
 def recertify_dataset(source: str, name: str, *, reference_time_s: float = 10.0, rrt_runs: int = 3, jobs: int = 2,
                       argv: list[str], progress_bar: bool = True) -> dict[str, Any]:
     """Write dataset `name`: `source` with every benchmark reference certified. Returns its manifest."""
-    from suite.run.build_dataset import plan_references, write_dataset_files
+    from suite.run.build_dataset import write_dataset_files
+    from suite.run.references import plan_references
     from suite.run.lock import LOCK_FILE, RunLock
     from suite.run.runner import git_commit, versions
 

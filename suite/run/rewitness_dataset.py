@@ -31,7 +31,8 @@ from suite.problems.dataset import (
 
 def rewitness_dataset(name: str, *, argv: list[str]) -> dict[str, Any]:
     """Apply the witness rule to dataset `name` in place; returns its new manifest."""
-    from suite.run.build_dataset import _clearance_summary, write_dataset_files
+    from suite.run.build_dataset import write_dataset_files
+    from suite.run.references import clearance_summary
     from suite.run.lock import LOCK_FILE, RunLock
     from suite.run.runner import git_commit
     from suite.run.witnesses import MIN_WITNESS_CLEARANCE_M, witness_with_margin
@@ -73,7 +74,7 @@ def rewitness_dataset(name: str, *, argv: list[str]) -> dict[str, Any]:
         "hash": dataset_hash(scene_lines, records),
         "counts": counts,
         "tiers": {t: [pid for pid in ids if pid not in gone] for t, ids in manifest.get("tiers", {}).items()},
-        "witness_clearance_m": _clearance_summary([r["witness"]["clearance_min_m"] for r in records
+        "witness_clearance_m": clearance_summary([r["witness"]["clearance_min_m"] for r in records
                                                    if r.get("benchmark", True) and not r.get("trivial")]),
         "rewitnessed": {"command": " ".join(["python -m suite", *argv]), "git_commit": git_commit(),
                         "hash_before": manifest["hash"], "min_clearance_m": MIN_WITNESS_CLEARANCE_M,
