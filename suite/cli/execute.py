@@ -39,7 +39,7 @@ def print_outcomes(records) -> None:
 def run(args: argparse.Namespace) -> int:
     from planners.registry import planner_class
     from suite.execution.jobs import ExecutionJob, run_jobs, write_execution
-    from suite.execution.plant import CONTACT_MODELS, ExecutionConfig
+    from suite.execution.config import CONTACT_MODELS, ExecutionConfig
     from suite.run.trial import config_dict, make_config
 
     cls = planner_class(args.planner)  # unknown names fail here, listing the known ones

@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from suite.execution.plant import ExecutionConfig
+from suite.execution.config import ExecutionConfig
 from suite.scoring.timing import TimedTrajectory
 
 #: The motions of one can's cycle and the gripper actions between them, in execution order.

@@ -22,7 +22,7 @@ from planners.base import PROBLEM_KINDS, PlanningProblem
 from scenes.scene import CanPose, Scene
 from suite.execution.commands import WorldState, planned_ahead, timed_cycle
 from suite.execution.monitor import where
-from suite.execution.plant import ExecutionConfig
+from suite.execution.config import ExecutionConfig
 from suite.execution.simulate import execute_cycles
 from suite.run.records import FINAL_RETURN_NOT_EXECUTED
 

@@ -22,7 +22,8 @@ import numpy as np
 from scenes.scene import Scene
 from suite.execution.commands import CommandStream, CycleProvider, WorldState
 from suite.execution.monitor import CanResult, ContactEvent, Monitor
-from suite.execution.plant import ExecutionConfig, build_simulation
+from suite.execution.config import ExecutionConfig
+from suite.execution.plant import build_simulation
 
 log = logging.getLogger(__name__)
 
