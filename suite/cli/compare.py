@@ -64,6 +64,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reperceive", action="store_true",
                    help="with --execute: closed loop, perceive and plan again after each pick")
     p.add_argument("--no-plots", action="store_true", help="skip drawing the plots")
+    p.add_argument("--wide", action="store_true",
+                   help="print every metric with its quartiles in the terminal table (about 250 columns)")
     p.add_argument("--no-html", action="store_true", help="skip writing report.html (the one-page report of the run)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -385,7 +387,7 @@ def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path) -> i
         _execute(trials, out, config, reperceive=args.reperceive, progress_bar=not args.no_progress)
     from suite.report.write import write_report
 
-    table = write_report(out, plots=not args.no_plots, html=not args.no_html)
+    table = write_report(out, plots=not args.no_plots, html=not args.no_html, wide=args.wide)
     print(table)
     if not args.no_html:
         from suite.report.html import REPORT_FILE

@@ -81,16 +81,21 @@ def common_rows(stats: dict[str, dict[str, MetricStats]], planners: Sequence[str
 TERMINAL_METRICS = {"length_ratio": "length /\nreference", "clearance_min_m": "clearance\n(mm)"}
 
 
-def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None) -> str:
+def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None,
+                  wide: bool = False) -> str:
     """The per-planner table for the terminal, narrow enough for 80 columns: success k/n with its
     interval, the median time to solve (failures at the budget) and the medians of a few metrics,
     over distinct problems; then the composition line (and its warning when too few), the exact
-    verdicts, and where the rest is."""
+    verdicts, and where the rest is. `wide`: every metric with its quartiles (summary.md's table,
+    about 250 columns)."""
     if not records:
         return "no trial records"
     groups = summarize(records, planners=planners)
     headers = ["planner", "success (95% CI)", "time to\nsolve (s)", *TERMINAL_METRICS.values()]
     rows = []
+    if wide:
+        headers, rows = group_rows(groups, key=None)
+        groups = []
     for g in groups:
         cells = [g.planner, _rate(g), "n/a" if g.time_to_solve.n == 0 else format_number(g.time_to_solve.median)]
         for m in TERMINAL_METRICS:
@@ -99,7 +104,8 @@ def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] 
             cells.append("n/a" if st.n == 0 else format_number(scale * st.median))
         rows.append(cells)
     lines = [composition(records), certification_line(records, [g.planner for g in groups]),
-             "Medians; every metric with its quartiles, per family and kind: summary.md (and report.html)."]
+             "Medians [quartiles]; per family and kind: summary.md (and report.html)." if wide else
+             "Medians; every metric with its quartiles (--wide), per family and kind: summary.md (and report.html)."]
     return tabulate(rows, headers=headers, tablefmt="simple") + "\n" + "\n".join(
         textwrap.fill(ln, width=80, break_on_hyphens=False) for ln in "\n".join(lines).split("\n"))
 

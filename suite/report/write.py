@@ -11,7 +11,8 @@ from suite.run.records import TRIALS_FILE
 log = logging.getLogger(__name__)
 
 
-def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, seed: int = 0) -> str:
+def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, seed: int = 0,
+                 wide: bool = False) -> str:
     """Write summary.md/.csv, paired.csv, the OMPL benchmark logs (arena/), the plots (plots/) and
     report.html (which inlines those plots, so it is written last).
 
@@ -20,6 +21,7 @@ def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, 
         plots: also draw the PNG figures (the slowest part, a few seconds).
         html: also write report.html (`suite.report.html`).
         seed: seeds the bootstrap generator of the paired comparisons.
+        wide: the terminal table with every metric and its quartiles (`compare --wide`).
 
     Returns:
         The per-planner summary table, printable.
@@ -69,7 +71,7 @@ def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, 
         written.append(write_html(run_dir, records=records, planners=planners, summary=summary, pairs=pairs,
                                   executions=executions))
     log.debug("wrote %s", ", ".join(str(p) for p in written))
-    table = summary_table(records, planners=planners)
+    table = summary_table(records, planners=planners, wide=wide)
     if executions:
         table += "\n\nExecution in physics:\n" + execution_table(executions, planners=planners, tablefmt="simple")
     return table

@@ -135,7 +135,19 @@ def test_summary_table_shows_k_of_n_and_medians_in_80_columns():
     ik_line = next(ln for ln in text.splitlines() if ln.startswith("ik"))
     assert "0/1 (0% [0, 79])" in ik_line and "n/a" in ik_line
     assert max(len(ln) for ln in text.splitlines()) <= 80  # it fits a terminal
-    assert "summary.md" in text  # and says where the rest is
+    assert "summary.md" in text and "--wide" in text  # and says where the rest is
+
+
+def test_wide_summary_table_has_every_metric_with_quartiles():
+    from suite.report.summary_stats import SUMMARY_METRICS
+
+    records = five_rrt_trials()
+    narrow, wide = summary_table(records), summary_table(records, wide=True)
+    header = "\n".join(wide.splitlines()[:4])
+    for label in SUMMARY_METRICS.values():
+        assert label.split("\n")[0] in header, label
+    assert "[" in next(ln for ln in wide.splitlines() if ln.startswith("rrt")).split("80%")[1]  # quartiles
+    assert max(len(ln) for ln in wide.splitlines()) > max(len(ln) for ln in narrow.splitlines())
 
 
 # --- paired statistics -----------------------------------------------------------------------------
