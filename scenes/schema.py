@@ -121,6 +121,11 @@ def load(tp: Any, data: Any, *, where: str = "", at: str = "", ignore_unknown: b
         raise SuiteError(error_line(exc, data, tp, where=where, at=at)) from None
 
 
+def json_schema(tp: Any) -> dict[str, Any]:
+    """The JSON Schema (2020-12) of what `load(tp, ...)` accepts, with the fields' descriptions."""
+    return _adapter(tp).json_schema()
+
+
 def fields_of(tp: Any) -> list[str]:
     """The names `load` accepts for the dataclass `tp`."""
     return [f.name for f in dataclasses.fields(tp) if f.init]
@@ -143,14 +148,17 @@ def error_line(exc: pydantic.ValidationError, data: Any, tp: Any, *, where: str,
     if err["type"] in ("missing", "missing_keyword_argument") and not items:
         return f"{where}field '{field}' is missing"
     value = _lookup(data, loc)
+    shown = repr(value)
+    if len(shown) > 100:  # a long list (a path): its start names it well enough
+        shown = shown[:96] + " ..."
     if err["type"] == "missing":
-        msg = f"item {items[-1]} is missing: the list is too short"
+        msg = f"item {'.'.join(items)} is missing: the list is too short"
     else:
         msg = re.sub(r" or instance of \w+", "", err["msg"]).removeprefix("Value error, ")
         msg = msg.replace("a valid tuple", "a list").replace("Tuple should", "the list should")
         msg = msg[0].lower() + msg[1:]
     at = f" (item {'.'.join(items)})" if items and err["type"] != "missing" else ""
-    return f"{where}field '{field}' = {value!r}{at}: {msg}"
+    return f"{where}field '{field}' = {shown}{at}: {msg}"
 
 
 def _lookup(data: Any, loc: list) -> Any:

@@ -1,6 +1,6 @@
 """`import`: an external planner's results file judged exactly like a suite trial.
 
-Each line of the results file (`suite.exchange.schema.RESULT_SCHEMA`) names a problem of the
+Each line of the results file (`ResultLine`, the schema of a line) names a problem of the
 dataset by `problem_id`. Every line is checked before anything is judged: a line that is not a
 JSON object, lacks a field, names a problem the dataset (tier) does not hold, repeats a problem,
 or gives a path that is not an (N, 7) list of finite numbers is one `SuiteError` naming the line,
@@ -15,55 +15,60 @@ import dataclasses
 import datetime as dt
 import hashlib
 import json
-import math
 import os
 import re
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import Field
 
 from planners.base import PlanResult, PlanStatus
 from scenes.errors import SuiteError
+from scenes.schema import load
 from suite.run.records import MANIFEST_FILE, NO_RESULT, TRIALS_FILE
 
-#: Fields of a results line (see RESULT_SCHEMA).
-REQUIRED = ("problem_id", "status", "path", "planning_time_s")
-OPTIONAL = ("hardware", "notes", "stats")
 #: Reported statuses kept as the record's status when the line has no path; any other word with
 #: no path is recorded as no_solution.
 KEPT_FAILURES = tuple(s.value for s in (PlanStatus.NO_SOLUTION, PlanStatus.TIMEOUT, PlanStatus.ERROR,
                                         PlanStatus.INVALID_START, PlanStatus.INVALID_GOAL))
 PLANNER_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}$")
 
+_Q = Annotated[tuple[float, float, float, float, float, float, float],
+               Field(description="joint positions of iiwa_joint_1..7, rad")]
+
 
 @dataclasses.dataclass(frozen=True)
 class ResultLine:
-    """One checked line of a results file.
+    """One line of the results file: an external planner's answer to one problem. The schema of a
+    line (`read_results` loads each into it; the export's schema.json is generated from it)."""
 
-    Attributes:
-        lineno: its line number (1-based).
-        problem_id: the problem it answers.
-        status: the planner's own status word.
-        path: the claimed path (N, 7) rad, or None.
-        planning_time_s: the planner's reported wall time, s.
-        hardware, notes, stats: kept in the record as given (None when absent).
-    """
+    problem_id: Annotated[str, Field(description="the problem's problem_id, as exported")]
+    status: Annotated[str, Field(description="your planner's own status word (kept as reported_status); "
+                                             f"{', '.join(KEPT_FAILURES)} are kept as the record's status when "
+                                             "path is null")]
+    path: Annotated[Annotated[tuple[_Q, ...], Field(min_length=1)] | None, Field(description=(
+        "your solution: waypoints (N >= 1) of iiwa_joint_1..7 in rad, from q_start to q_goal, joined by "
+        "straight joint-space segments; null for no solution. A non-null path is judged as a claimed "
+        "solution whatever status says"))]
+    planning_time_s: Annotated[float, Field(ge=0, description="your planner's wall time for this problem, s")]
+    hardware: Annotated[str | dict[str, Any] | None, Field(description="where it ran (CPU, GPU), kept in the "
+                                                                       "record")] = None
+    notes: Annotated[str | None, Field(description="free text, kept in the record")] = None
+    stats: Annotated[dict[str, Any] | None, Field(description="planner statistics (plain JSON), kept in the "
+                                                              "record")] = None
 
-    lineno: int
-    problem_id: str
-    status: str
-    path: np.ndarray | None
-    planning_time_s: float
-    hardware: Any = None
-    notes: str | None = None
-    stats: dict[str, Any] | None = None
+    @property
+    def path_array(self) -> np.ndarray | None:
+        """The path as an (N, 7) float array, or None."""
+        return None if self.path is None else np.asarray(self.path, float)
 
 
 def read_results(path: str | Path, *, known: set[str], dataset: str,
                  elsewhere: Callable[[str], bool] = lambda pid: False) -> list[ResultLine]:
-    """Read and check a results file.
+    """Read and check a results file: each line is loaded into `ResultLine` (`scenes.schema.load`),
+    then its problem_id is checked against the dataset's tier and the lines before it.
 
     Args:
         path: the JSON-lines results file.
@@ -94,60 +99,19 @@ def read_results(path: str | Path, *, known: set[str], dataset: str,
             raise SuiteError(f"{where} is not valid JSON") from None
         if not isinstance(rec, dict):
             raise SuiteError(f"{where} is not a JSON object")
-        missing = [k for k in REQUIRED if k not in rec]
-        if missing:
-            raise SuiteError(f"{where} lacks the field(s) {', '.join(missing)}; required: {', '.join(REQUIRED)}")
-        unknown = sorted(set(rec) - set(REQUIRED) - set(OPTIONAL))
-        if unknown:
-            raise SuiteError(f"{where}: unknown field {unknown[0]!r}; allowed: {', '.join(REQUIRED + OPTIONAL)}")
-        pid = rec["problem_id"]
-        if not isinstance(pid, str) or pid not in known:
+        result = load(ResultLine, rec, where=f"{where}: ")
+        pid = result.problem_id
+        if pid not in known:
             name, _, tier = dataset.partition(":")
-            if isinstance(pid, str) and elsewhere(pid):
+            if elsewhere(pid):
                 raise SuiteError(f"{where}: problem_id {pid!r} is in dataset {name} but not in tier {tier!r} "
                                  "being imported")
             raise SuiteError(f"{where}: problem_id {pid!r} is not a problem of dataset {dataset}")
         if pid in seen:
             raise SuiteError(f"{where}: problem_id {pid!r} was already answered on line {seen[pid]}")
         seen[pid] = lineno
-        if not isinstance(rec["status"], str):
-            raise SuiteError(f"{where}: status must be a string, got {rec['status']!r}")
-        t = rec["planning_time_s"]
-        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
-            raise SuiteError(f"{where}: planning_time_s must be a finite number >= 0 (seconds), got {t!r}")
-        if rec.get("notes") is not None and not isinstance(rec["notes"], str):
-            raise SuiteError(f"{where}: notes must be a string")
-        if rec.get("stats") is not None and not isinstance(rec["stats"], dict):
-            raise SuiteError(f"{where}: stats must be a JSON object")
-        if rec.get("hardware") is not None and not isinstance(rec["hardware"], (str, dict)):
-            raise SuiteError(f"{where}: hardware must be a string or a JSON object")
-        out.append(ResultLine(lineno, pid, rec["status"], _path(rec["path"], where), float(t),
-                              rec.get("hardware"), rec.get("notes"), rec.get("stats")))
+        out.append(result)
     return out
-
-
-def _path(raw: Any, where: str) -> np.ndarray | None:
-    """A path as an (N, 7) float array, or None; anything else is a SuiteError naming the line."""
-    if raw is None:
-        return None
-    ok = isinstance(raw, list) and len(raw) >= 1 and all(
-        isinstance(row, list) and len(row) == 7
-        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in row) for row in raw)
-    if ok:
-        arr = np.asarray(raw, float)
-        if np.all(np.isfinite(arr)):
-            return arr
-    raise SuiteError(f"{where}: path must be null or a list of N >= 1 waypoints of 7 finite numbers (rad), "
-                     f"got {_shape(raw)}")
-
-
-def _shape(raw: Any) -> str:
-    if not isinstance(raw, list):
-        return type(raw).__name__
-    lengths = sorted({len(r) if isinstance(r, list) else -1 for r in raw})
-    if lengths == [7]:
-        return f"{len(raw)} waypoints with a non-finite or non-numeric value"
-    return f"{len(raw)} waypoints of length {', '.join('not a list' if n < 0 else str(n) for n in lengths)}"
 
 
 def _reported(line: ResultLine) -> PlanResult:
@@ -156,7 +120,7 @@ def _reported(line: ResultLine) -> PlanResult:
     if line.stats:
         stats["external_stats"] = line.stats
     if line.path is not None:
-        return PlanResult(PlanStatus.SUCCESS, line.path, stats)
+        return PlanResult(PlanStatus.SUCCESS, line.path_array, stats)
     status = line.status if line.status in KEPT_FAILURES else PlanStatus.NO_SOLUTION.value
     return PlanResult(PlanStatus(status), None, stats)
 

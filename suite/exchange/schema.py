@@ -1,7 +1,8 @@
 """The JSON Schema of an export's problems and of the results file an external planner sends back.
 
-The schema is the documentation of both formats (every quantity with its unit); the import's own
-line checks (`suite.exchange.results`) enforce the results part with one error line per bad line.
+The schema is the documentation of both formats (every quantity with its unit). The results part
+is generated from the dataclass the import loads every line into (`suite.exchange.results.ResultLine`),
+so what is documented is what is checked, with one error line per bad line.
 """
 
 from __future__ import annotations
@@ -158,29 +159,16 @@ PROBLEM_SCHEMA: dict[str, Any] = {
     },
 }
 
-RESULT_SCHEMA: dict[str, Any] = {
-    "type": "object",
-    "description": "One line of the results file: your planner's answer to one problem.",
-    "required": ["problem_id", "status", "path", "planning_time_s"],
-    "additionalProperties": False,
-    "properties": {
-        "problem_id": {**_STR, "description": "the problem's problem_id, as exported"},
-        "status": {**_STR, "description": "your planner's own status word (kept as reported_status); "
-                                          "no_solution, timeout, error, invalid_start, invalid_goal are kept "
-                                          "as the record's status when path is null"},
-        "path": {
-            "description": "your solution: waypoints (N >= 1) of iiwa_joint_1..7 in rad, from q_start to "
-                           "q_goal, joined by straight joint-space segments; null for no solution. A "
-                           "non-null path is judged as a claimed solution whatever status says",
-            "oneOf": [{"type": "null"}, {"type": "array", "minItems": 1, "items": _Q}],
-        },
-        "planning_time_s": {**_NUM, "minimum": 0, "description": "your planner's wall time for this problem, s"},
-        "hardware": {"description": "where it ran (CPU, GPU), kept in the record",
-                     "oneOf": [_STR, {"type": "object"}]},
-        "notes": {**_STR, "description": "free text, kept in the record"},
-        "stats": {"type": "object", "description": "planner statistics (plain JSON), kept in the record"},
-    },
-}
+def result_schema() -> dict[str, Any]:
+    """`$defs/result`: generated from `suite.exchange.results.ResultLine`, the dataclass `import`
+    loads every line into, so the documented format and the checked one are the same."""
+    from scenes.schema import json_schema
+    from suite.exchange.results import ResultLine
+
+    doc = json_schema(ResultLine)
+    doc.pop("title", None)
+    doc["description"] = "One line of the results file: your planner's answer to one problem."
+    return doc
 
 
 def schema_document() -> dict[str, Any]:
@@ -191,5 +179,5 @@ def schema_document() -> dict[str, Any]:
         "title": "Can-recycling planner suite: exported problems and external planner results",
         "description": "problems.jsonl holds one $defs/problem per line; send back a JSON-lines file of "
                        "$defs/result, one line per problem you attempted.",
-        "$defs": {"problem": PROBLEM_SCHEMA, "result": RESULT_SCHEMA},
+        "$defs": {"problem": PROBLEM_SCHEMA, "result": result_schema()},
     }
