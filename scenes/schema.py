@@ -121,6 +121,17 @@ def load(tp: Any, data: Any, *, where: str = "", at: str = "", ignore_unknown: b
         raise SuiteError(error_line(exc, data, tp, where=where, at=at)) from None
 
 
+def refusal(tp: Any, value: Any) -> str | None:
+    """Why `value` is not a `tp` ("input should be greater than 0"), or None if it is one (for a
+    value that comes without a field name, such as a command-line flag's)."""
+    try:
+        _adapter(tp).validate_python(value)
+    except pydantic.ValidationError as exc:
+        msg = exc.errors(include_url=False)[0]["msg"].removeprefix("Value error, ")
+        return msg[0].lower() + msg[1:]
+    return None
+
+
 def json_schema(tp: Any) -> dict[str, Any]:
     """The JSON Schema (2020-12) of what `load(tp, ...)` accepts, with the fields' descriptions."""
     return _adapter(tp).json_schema()

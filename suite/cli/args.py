@@ -3,49 +3,36 @@
 from __future__ import annotations
 
 import argparse
-import math
+from collections.abc import Callable
+from typing import Any
 
 from scenes.errors import SuiteError
+from scenes.schema import NonNeg, NonNegInt, Pos, PosInt, Unit, refusal
 
 
-def positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be a positive integer")
-    return v
+def flag(tp: Any, kind: type) -> Callable[[str], Any]:
+    """An argparse type: the text read as `kind` (int or float), then checked against the schema
+    type `tp` (`scenes.schema`'s aliases), so a flag and a YAML field of one type allow the same
+    values, with the same words."""
+    noun = "an integer" if kind is int else "a number"
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {noun}") from None
+        why = refusal(tp, value)
+        if why is not None:
+            raise argparse.ArgumentTypeError(f"{text!r}: {why}")
+        return value
+
+    return parse
 
 
-def nonneg_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be an integer >= 0")
-    return v
-
-
-def positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number > 0")
-    return v
-
-
-def nonneg_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(v) or v < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number >= 0")
-    return v
+positive_int = flag(PosInt, int)
+nonneg_int = flag(NonNegInt, int)
+positive_float = flag(Pos, float)
+nonneg_float = flag(NonNeg, float)
 
 
 def add_scene_arguments(p: argparse.ArgumentParser) -> None:
@@ -72,7 +59,7 @@ def parse_color(text: str) -> tuple[float, float, float, float]:
         vals = [float(v) for v in text.split(",")]
     except ValueError:
         vals = []
-    if len(vals) != 3 or any(not 0 <= v <= 1 for v in vals):
+    if len(vals) != 3 or any(refusal(Unit, v) for v in vals):
         raise SuiteError(f"--can-color must be three numbers in [0, 1] like 0.1,0.3,0.9, got {text!r}")
     return (vals[0], vals[1], vals[2], 1.0)
 

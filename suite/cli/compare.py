@@ -72,7 +72,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def budget_list(text: str) -> tuple[float, ...]:
     """"0.05,0.2,1,5" -> (0.05, 0.2, 1.0, 5.0): positive, finite, distinct, in ascending order."""
-    import math
+    from scenes.schema import Pos, refusal
 
     values = []
     for part in text.split(","):
@@ -80,8 +80,9 @@ def budget_list(text: str) -> tuple[float, ...]:
             v = float(part)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{part.strip()!r} in {text!r} is not a number of seconds") from None
-        if not (math.isfinite(v) and v > 0):
-            raise argparse.ArgumentTypeError(f"budget {part.strip()!r} must be a positive, finite number of seconds")
+        why = refusal(Pos, v)
+        if why is not None:
+            raise argparse.ArgumentTypeError(f"budget {part.strip()!r} (seconds): {why}")
         values.append(v)
     if len(set(values)) != len(values):
         raise argparse.ArgumentTypeError(f"--budgets {text!r} names a budget twice")

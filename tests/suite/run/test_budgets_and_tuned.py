@@ -22,7 +22,7 @@ def test_budgets_multiply_the_trials_and_are_recorded():
 
 
 @pytest.mark.parametrize("argv, expected", [
-    (["--budgets", "0,1"], "budget '0' must be a positive, finite number of seconds"),
+    (["--budgets", "0,1"], "budget '0' (seconds): input should be greater than 0"),
     (["--budgets", "0.2,x"], "'x' in '0.2,x' is not a number of seconds"),
     (["--budgets", "1,1"], "names a budget twice"),
     (["--budgets", "0.2,1", "--time-limit-s", "2"], "use one or the other"),
