@@ -57,24 +57,59 @@ def scene_from_record(rec: dict[str, Any]) -> Scene:
     return Scene(spec_from_dict(rec["spec"]), int(rec["seed"]), cans)
 
 
+Pose = tuple[tuple[float, float, float, float], tuple[float, float, float, float],
+             tuple[float, float, float, float], tuple[float, float, float, float]]
+Q = tuple[float, float, float, float, float, float, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class StoredWaypoint:
+    """A task waypoint: its time in the cycle's schedule and the gripper pose (4x4, m)."""
+
+    t: float
+    X_WG: Pose
+
+
+@dataclasses.dataclass(frozen=True)
+class StoredHeld:
+    """The can in the gripper: which, and its pose in the gripper frame (4x4, m)."""
+
+    can_id: int
+    X_GC: Pose
+
+
+@dataclasses.dataclass(frozen=True)
+class StoredProblem:
+    """A problem as a line of problems.jsonl holds it (written by `problem_record`, read by
+    `problem_from_record`); the line's other fields (trivial, split, reference, witness, ...) are
+    the build's `meta`, kept as they are."""
+
+    problem_id: str
+    scene_key: str
+    family: str
+    scene_seed: int
+    kind: str
+    can_id: int
+    q_start: Q
+    q_goal: Q
+    X_WG_goal: Pose
+    waypoints: tuple[StoredWaypoint, ...]
+    held: StoredHeld | None
+    gripper_opening_m: float
+    removed_can_ids: tuple[int, ...]
+
+
 def problem_record(problem: PlanningProblem, meta: dict[str, Any]) -> dict[str, Any]:
     """A problem as stored; `meta` adds trivial, difficulty, split and the reference."""
-    rec = {
-        "problem_id": problem_id(problem),
-        "scene_key": problem.scene.key(),
-        "family": problem.scene.variant,
-        "scene_seed": problem.scene.seed,
-        "kind": problem.kind,
-        "can_id": problem.can_id,
-        "q_start": np.asarray(problem.q_start, float).tolist(),
-        "q_goal": np.asarray(problem.q_goal, float).tolist(),
-        "X_WG_goal": _pose(problem.X_WG_goal),
-        "waypoints": [{"t": w.t, "X_WG": _pose(w.X_WG)} for w in problem.waypoints],
-        "held": None if problem.held is None else {"can_id": problem.held.can.id, "X_GC": _pose(problem.held.X_GC)},
-        "gripper_opening_m": problem.gripper_opening_m,
-        "removed_can_ids": list(problem.removed_can_ids),
-        **meta,
-    }
+    stored = StoredProblem(
+        problem_id=problem_id(problem), scene_key=problem.scene.key(), family=problem.scene.variant,
+        scene_seed=problem.scene.seed, kind=problem.kind, can_id=problem.can_id,
+        q_start=np.asarray(problem.q_start, float).tolist(), q_goal=np.asarray(problem.q_goal, float).tolist(),
+        X_WG_goal=_pose(problem.X_WG_goal),
+        waypoints=[StoredWaypoint(w.t, _pose(w.X_WG)) for w in problem.waypoints],
+        held=None if problem.held is None else StoredHeld(problem.held.can.id, _pose(problem.held.X_GC)),
+        gripper_opening_m=problem.gripper_opening_m, removed_can_ids=list(problem.removed_can_ids))
+    rec = {**dataclasses.asdict(stored), **meta}
     rec["record_hash"] = record_hash(rec)
     return rec
 
@@ -85,18 +120,24 @@ def record_hash(rec: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()[:20]
 
 
-def problem_from_record(rec: dict[str, Any], scene: Scene, *, time_limit_s: float, seed: int = 0) -> PlanningProblem:
+def problem_from_record(rec: dict[str, Any], scene: Scene, *, time_limit_s: float, seed: int = 0,
+                        where: str = "stored problem: ") -> PlanningProblem:
+    """The problem of a problems.jsonl line, loaded into `StoredProblem` (one SuiteError line,
+    starting with `where`, for a bad field)."""
+    sp = load(StoredProblem, rec, where=where, ignore_unknown=True)
     held = None
-    if rec["held"] is not None:
-        can = next(c for c in scene.cans if c.id == rec["held"]["can_id"])
-        held = HeldCan(can, np.asarray(rec["held"]["X_GC"], float))
+    if sp.held is not None:
+        can = next((c for c in scene.cans if c.id == sp.held.can_id), None)
+        if can is None:
+            raise SuiteError(f"{where}field 'held.can_id' = {sp.held.can_id}: no such can in scene {sp.scene_key}")
+        held = HeldCan(can, np.asarray(sp.held.X_GC, float))
     return PlanningProblem(
-        kind=rec["kind"], scene=scene, can_id=int(rec["can_id"]),
-        q_start=np.asarray(rec["q_start"], float), q_goal=np.asarray(rec["q_goal"], float),
-        X_WG_goal=np.asarray(rec["X_WG_goal"], float),
-        waypoints=tuple(TaskWaypoint(float(w["t"]), np.asarray(w["X_WG"], float)) for w in rec["waypoints"]),
-        held=held, gripper_opening_m=float(rec["gripper_opening_m"]),
-        removed_can_ids=tuple(int(i) for i in rec["removed_can_ids"]), time_limit_s=time_limit_s, seed=seed,
+        kind=sp.kind, scene=scene, can_id=sp.can_id,
+        q_start=np.asarray(sp.q_start, float), q_goal=np.asarray(sp.q_goal, float),
+        X_WG_goal=np.asarray(sp.X_WG_goal, float),
+        waypoints=tuple(TaskWaypoint(w.t, np.asarray(w.X_WG, float)) for w in sp.waypoints),
+        held=held, gripper_opening_m=sp.gripper_opening_m,
+        removed_can_ids=sp.removed_can_ids, time_limit_s=time_limit_s, seed=seed,
     )
 
 
@@ -288,7 +329,9 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
         try:
             if key not in built:
                 built[key] = scene_from_record(scenes[key])
-            problem = problem_from_record(rec, built[key], time_limit_s=time_limit_s)
+            problem = problem_from_record(rec, built[key], time_limit_s=time_limit_s,
+                                          where=f"{directory / PROBLEMS_FILE}: line {lineno} (problem {pid}) is not a "
+                                                "stored problem: ")
             ref = np.asarray(rec["reference"]["path"], float)
         except (KeyError, TypeError, ValueError, StopIteration) as exc:
             what = f"field {exc.args[0]!r} missing" if isinstance(exc, KeyError) else f"{type(exc).__name__}: {exc}"

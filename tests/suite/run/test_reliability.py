@@ -236,7 +236,7 @@ def test_bad_stored_problem_line_is_one_line(tmp_path):
     lines[first] = json.dumps(rec)
     (d / "problems.jsonl").write_text("\n".join(lines) + "\n")
     with pytest.raises(SuiteError, match=rf"line {first + 1} \(problem {rec['problem_id']}\) is not a stored "
-                                         r"problem: field 'q_goal' missing"):
+                                         r"problem: field 'q_goal' is missing"):
         load_dataset(str(d))
 
 
