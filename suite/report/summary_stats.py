@@ -29,18 +29,12 @@ from suite.report.outcomes import (
     wilson_interval,
 )
 from suite.run.records import planners_in, problem_kinds_in, statuses_in
+from suite.scoring.definitions import metric_def
 
-#: The metrics of the summary: record field -> column label (with unit).
-SUMMARY_METRICS: dict[str, str] = {
-    "planning_time_s": "planning time (s)",
-    "path_length_rad": "path length (rad)",
-    "length_ratio": "length / reference",
-    "turning_angle_rad": "turning angle (rad)",
-    "sparc": "SPARC (higher: smoother)",
-    "clearance_min_m": "min clearance (m)",
-    "duration_s": "duration (s)",
-    "offline_s": "offline (s)",
-}
+#: The metrics of the summary, in its column order: record field -> column label (`MetricDef.column`).
+SUMMARY_METRICS: dict[str, str] = {name: metric_def(name).column for name in (
+    "planning_time_s", "path_length_rad", "length_ratio", "turning_angle_rad", "sparc", "clearance_min_m",
+    "duration_s", "offline_s")}
 ALL = "all"
 N_RESAMPLES = 2000
 

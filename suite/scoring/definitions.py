@@ -28,6 +28,7 @@ class MetricDef:
         group: the theme it belongs to (for tables and plot panels).
         note: how it differs from the field's usual definition ("" if it does not).
         headline: shown in the summary and plots by default.
+        label: its column label in tables, unit included ("" for its name and unit).
     """
 
     name: str
@@ -37,6 +38,15 @@ class MetricDef:
     group: Group
     note: str = ""
     headline: bool = False
+    label: str = ""
+
+    @property
+    def column(self) -> str:
+        """The column label: `label`, else its name without the unit suffix, with its unit."""
+        if self.label:
+            return self.label
+        base = self.name.removesuffix(f"_{self.unit}") if self.unit != "1" else self.name
+        return base.replace("_", " ") + ("" if self.unit == "1" else f" ({self.unit})")
 
 
 #: Largest joint-space spacing (L2, rad) of the coarse samples along a path (the mean clearance).
@@ -52,10 +62,10 @@ METRICS: tuple[MetricDef, ...] = (
     MetricDef("planning_time_s", "s", "lower",
               "wall time of the planner's plan() call, measured by the orchestrator; building the problem's "
               "world (python-fcl world, a Drake-based planner's diagram and program) is done before the clock "
-              "starts and recorded apart as setup_time_s", "time", headline=True),
+              "starts and recorded apart as setup_time_s", "time", headline=True, label="planning time (s)"),
     MetricDef("duration_s", "s", "lower",
               "duration of the TOPP-RA time-optimal trajectory within the iiwa's velocity and acceleration limits",
-              "time", note="cuRobo's 'motion time'", headline=True),
+              "time", note="cuRobo's 'motion time'", headline=True, label="duration (s)"),
     MetricDef("timing_time_s", "s", "lower", "wall time of the TOPP-RA time parameterization and its checks", "time"),
     MetricDef("time_to_trajectory_s", "s", "lower",
               "planning_time_s + timing_time_s: the wall time from the problem to an executable, timed trajectory",
@@ -64,14 +74,15 @@ METRICS: tuple[MetricDef, ...] = (
               "offline preparation of the problem's collision world, outside planning time (gcs: the wall time "
               "its convex regions took to build, as recorded at the build; the same for every problem of the "
               "world, whether this run built them or loaded them)", "time",
-              note="reported beside planning time, never inside it, as the GCS paper reports region building"),
+              note="reported beside planning time, never inside it, as the GCS paper reports region building",
+              label="offline (s)"),
     MetricDef("time_to_solve_s", "s", "lower",
               "success-aware time, per distinct problem: median over its trials of planning_time_s, a failed "
               "trial counted at its time budget (summary only, over every problem, not just the solved ones)",
               "time", note="a failure costs the whole budget (as PAR-1 in solver competitions)"),
     MetricDef("path_length_rad", "rad", "lower",
               "joint-space length: sum of L2 distances between consecutive waypoints", "length",
-              note="as OMPL's PathGeometric::length() (MoveIt uses L1)", headline=True),
+              note="as OMPL's PathGeometric::length() (MoveIt uses L1)", headline=True, label="path length (rad)"),
     MetricDef("ee_path_length_m", "m", "lower",
               f"length of the gripper origin's Cartesian path, forward kinematics at samples {_FINE}",
               "length", headline=True),
@@ -79,7 +90,7 @@ METRICS: tuple[MetricDef, ...] = (
               f"total rotation of the gripper frame, summed over samples {_FINE}", "length"),
     MetricDef("length_ratio", "1", "lower",
               "joint path length / the problem's reference length (dataset's best known path); >= 1 unless "
-              "the planner beat the reference", "optimality", headline=True),
+              "the planner beat the reference", "optimality", headline=True, label="length / reference"),
     MetricDef("length_over_straight", "1", "lower",
               "joint path length / straight joint-space distance from start to goal (a lower bound, not an "
               "achievable optimum); >= 1", "optimality",
@@ -93,12 +104,13 @@ METRICS: tuple[MetricDef, ...] = (
     MetricDef("turning_angle_rad", "rad", "lower",
               "total turning angle of the joint path: sum of angles between consecutive segment directions, "
               "zero-length segments and collinear points dropped (0 for a straight segment)", "smoothness",
-              note="replaces OMPL's smoothness, which depends on waypoint spacing", headline=True),
+              note="replaces OMPL's smoothness, which depends on waypoint spacing", headline=True,
+              label="turning angle (rad)"),
     MetricDef("sparc", "1", "higher",
               "spectral arc length (SPARC, Balasubramanian et al. 2015; fc 10 Hz, threshold 0.05, padding 4) "
               "of the joint-space speed ||qd(t)|| of the TOPP-RA trajectory; <= 0, closer to 0 is smoother",
               "smoothness", note="MpiNets also reports SPARC of the end-effector speed; sign as in the paper",
-              headline=True),
+              headline=True, label="SPARC (higher: smoother)"),
     MetricDef("smoothness", "1/rad^2", "lower",
               "OMPL's PathGeometric::smoothness() on the path resampled every 0.05 rad; for the Planner Arena "
               "export only", "smoothness",
@@ -126,7 +138,8 @@ METRICS: tuple[MetricDef, ...] = (
     MetricDef("clearance_min_m", "m", "higher",
               f"smallest signed distance robot (and held can) to scene, negative in penetration; samples {_FINE}",
               "clearance",
-              note="OMPL's benchmark reports clearance at the waypoints only", headline=True),
+              note="OMPL's benchmark reports clearance at the waypoints only", headline=True,
+              label="min clearance (m)"),
     MetricDef("clearance_mean_m", "m", "higher",
               f"mean by arc length of the signed distance robot to scene; samples {_COARSE}",
               "clearance", note="OMPL's is the plain mean over the waypoints, which depends on their density"),
