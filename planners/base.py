@@ -179,8 +179,8 @@ class PlannerBase:
        `prepare` builds what else depends on the world alone);
     2. checks the endpoints (`check_endpoints`): a bad one is reported at once, with its cause;
     3. calls `solve(problem, world, deadline)` with the deadline of the problem's budget;
-    4. names the cause of a failure `solve` left unnamed (`stats["reason_code"]`, from the status
-       where the status says it: a timeout spent its budget, an error is the planner's).
+    4. fills in and checks the stats every planner shares (`shared_stats`: `reason_code`,
+       `solver`, `reason`).
 
     A subclass sets `name`, `Config` (a frozen dataclass), optionally `solver` (stats' name for
     what it runs) and its tuning (`search_space`, `tuning_objective`), and overrides `solve` and,
@@ -220,18 +220,37 @@ class PlannerBase:
         world = collision_world(problem)
         bad = check_endpoints(problem, world)
         if bad is not None:
-            return PlanResult(bad.status, None, {**bad.stats, **({"solver": self.solver} if self.solver else {})})
+            return shared_stats(bad, solver=self.solver)
         result = self.solve(problem, world, time.perf_counter() + float(problem.time_limit_s))
-        cause = STATUS_CAUSE.get(PlanStatus(result.status))
-        if result.status is not PlanStatus.SUCCESS and "reason_code" not in result.stats and cause is not None:
-            result = PlanResult(result.status, result.path, {**result.stats, "reason_code": cause.value})
-        return result
+        return shared_stats(result, solver=self.solver)
 
     def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
         """The algorithm: a path from `problem.q_start` to `problem.q_goal` (both checked valid),
         within `deadline` (`time.perf_counter()` seconds). Failures name their cause in
         `stats["reason_code"]` (`FailureReason`)."""
         raise NotImplementedError
+
+
+def shared_stats(result: PlanResult, *, solver: str | None) -> PlanResult:
+    """The stats every planner's result shares, filled in and checked (`PlannerBase.plan`):
+
+    - `reason_code`: a `FailureReason` value on a failure, named from the status when the planner
+      named none (a timeout spent its budget, an error is the planner's); a word that is no
+      `FailureReason` is the planner's bug (ValueError, which the trial records as its error);
+    - `solver`: what it ran (the class's `solver` unless the planner named one);
+    - `reason`: free text, the detail a reader needs (kept as the planner wrote it).
+
+    Every other key is the planner's own.
+    """
+    stats = dict(result.stats)
+    code = stats.get("reason_code")
+    if code is not None:
+        FailureReason(code)  # ValueError for a word that is no cause
+    elif result.status is not PlanStatus.SUCCESS and STATUS_CAUSE.get(PlanStatus(result.status)) is not None:
+        stats["reason_code"] = STATUS_CAUSE[PlanStatus(result.status)].value
+    if solver and "solver" not in stats:
+        stats["solver"] = solver
+    return PlanResult(result.status, result.path, stats)
 
 
 def check_endpoints(problem: PlanningProblem, world) -> PlanResult | None:
