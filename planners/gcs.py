@@ -2,22 +2,26 @@
 
 Marcucci et al., "Motion planning around obstacles with convex optimization" (Science Robotics
 2023). The configuration space is covered by collision-free convex regions (sampled IRIS, see
-`planners.gcs_regions`), built offline once per collision world and cached on disk; `prepare`
-loads them (or builds them on a miss) before the trial's clock starts, and their build time is
-reported as `stats.offline_s`, never as planning time.
+`planners.gcs_regions`), built offline once per collision world from the world alone (its task
+chain, `planners.gcs_cover`; `seeding`) and cached on disk; `prepare` loads them (or builds them
+on a miss) before the trial's clock starts, and their build time is reported as
+`stats.offline_s`, never as planning time.
 
-Online, one Bezier curve per visited region (order 1 by default: straight segments, so the cost
-is exactly the joint-space path length), start and goal as point regions of order 0, joined
+Online (planning time), start and goal are joined to the regions: an end no region holds is
+joined by a straight segment, free in the python-fcl world, to a point just inside the nearest
+region it can reach (`planners.gcs_solve.join_endpoint`); if none, the trial is NO_SOLUTION with
+`regions_disconnected`. Then one Bezier curve per visited region (order 1 by default: straight
+segments, so the cost is exactly the joint-space path length) between the joined ends, joined
 where regions intersect; the shortest path is found by the convex relaxation of the
 mixed-integer program followed by randomized rounding and a convex restriction on each rounded
-path, solved by Clarabel (ships with Drake). The time-free path is the curve sampled densely;
-the suite times it with TOPP-RA. Sampled IRIS regions are not certified collision-free: the path
-is checked with the python-fcl world at the validator's resolution, and where it collides that
-configuration is cut off (in-memory copies of) the regions holding it and GCS is solved again
-(`max_repairs`, planning time); a path still colliding after `max_repairs` is NO_SOLUTION, and
-repairs stopped by the planning budget are TIMEOUT. With `max_repairs=0` the
-path is returned unchecked and the suite's validator judges it (a collision is
-`invalid_solution`), as it judges every planner's path anyway.
+path, solved by Clarabel (ships with Drake). The time-free path is the curve sampled densely,
+with the joining segments at its ends; the suite times it with TOPP-RA. Sampled IRIS regions are
+not certified collision-free: the path is checked with the python-fcl world at the validator's
+resolution, and where it collides that configuration is cut off (in-memory copies of) the regions
+holding it and GCS is solved again (`max_repairs`, planning time); a path still colliding after
+`max_repairs` is NO_SOLUTION, and repairs stopped by the planning budget are TIMEOUT. With
+`max_repairs=0` the path is returned unchecked and the suite's validator judges it (a collision
+is `invalid_solution`), as it judges every planner's path anyway.
 
 Building regions inside a `compare` trial counts against the trial's hard limit (3 x budget +
 30 s): build them ahead with `python -m suite regions build --dataset NAME`.
@@ -34,7 +38,7 @@ import numpy as np
 
 from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
 from planners.gcs_regions import RegionOptions, RegionSet, problem_hash, regions_for
-from planners.gcs_solve import SOLVERS, checked_path
+from planners.gcs_solve import SOLVERS, checked_path, connect_ends
 from planners.worlds import remember
 from scenes.errors import SuiteError
 
@@ -100,6 +104,8 @@ class GcsPlanner(PlannerBase):
         self._regions: dict[tuple, tuple[RegionSet | None, dict]] = {}
 
     def _key(self, problem: PlanningProblem) -> tuple:
+        if self.config.seeding != "problem":  # one set per world, whatever the problem
+            return (problem.world_key(),)
         return (problem.world_key(), problem_hash(problem))
 
     def prepare(self, problem: PlanningProblem) -> None:
@@ -137,20 +143,32 @@ class GcsPlanner(PlannerBase):
             return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
         q_start = np.asarray(problem.q_start, float)
         q_goal = np.asarray(problem.q_goal, float)
-        stats["regions_connected"] = rs.connected(q_start, q_goal)
+        A, b = list(rs.A), list(rs.b)  # repairs cut these copies, not the cached set
+        edges = list(rs.edges)
+        # Online (planning time): join start and goal to the world's regions by free straight
+        # segments where no region holds them.
+        joined = connect_ends(A, b, edges, q_start, q_goal, world=world, resolution_rad=cfg.check_resolution_rad,
+                              deadline=deadline)
+        gcs_ends = joined.pop("ends")
+        stats["regions_connected"] = joined.pop("connected")
+        stats.update(joined)
+        stats["join_s"] = time.perf_counter() - t0
         if not stats["regions_connected"]:
-            stats["reason"] = "the regions do not connect start and goal"
+            unjoined = [n for n in ("start", "goal") if stats[f"{n}_join"] == "none"]
+            stats["reason"] = (f"no free straight segment joins the {unjoined[0]} to the regions" if unjoined
+                               else "the regions do not connect start and goal")
             stats["reason_code"] = FailureReason.REGIONS_DISCONNECTED.value
             stats["solve_time_s"] = time.perf_counter() - t0
             return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
 
-        A, b = list(rs.A), list(rs.b)  # repairs cut these copies, not the cached set
-        edges = list(rs.edges)
         path, solve_stats = checked_path(
-            A, b, edges, rs.seeds, q_start, q_goal, world=world, order=cfg.order,
+            A, b, edges, rs.seeds, gcs_ends[0], gcs_ends[1], world=world, order=cfg.order,
             max_rounded_paths=cfg.max_rounded_paths, solver=cfg.solver, seed=problem.seed,
             max_repairs=cfg.max_repairs, check_resolution_rad=cfg.check_resolution_rad,
-            sample_step_rad=cfg.sample_step_rad, deadline=t0 + problem.time_limit_s)
+            sample_step_rad=cfg.sample_step_rad, deadline=deadline)
+        if path is not None:  # the joining segments, checked free above
+            path = np.vstack([[q_start]] * (stats["start_join"] == "segment") + [path]
+                             + [[q_goal]] * (stats["goal_join"] == "segment"))
         stats.update(solve_stats)
         stats["solve_time_s"] = time.perf_counter() - t0
         if path is None:

@@ -88,7 +88,7 @@ def _invalid_region_cache(problem, directory, options):
     h = world_hash(problem, options)
     rs = RegionSet(h, [A], [b], [np.asarray(problem.q_start, float)], [0.0], offline_s=1.0,
                    problems=[gcs_regions.problem_hash(problem)], edges=[], iris=options.iris,
-                   checked=[gcs_regions.problem_hash(problem)])
+                   checked=[gcs_regions.problem_hash(problem), gcs_regions.WORLD_BUILT])
     rs.save(directory / f"{h}.npz")
 
 
@@ -132,6 +132,10 @@ def test_registry_and_config_errors():
         GcsConfig(solver="mosek")
     with pytest.raises(SuiteError, match="epsilon"):
         GcsConfig(epsilon=0.0)
+    with pytest.raises(SuiteError, match="seeding"):
+        GcsConfig(seeding="by-hand")
+    with pytest.raises(SuiteError, match="min_clique"):
+        GcsConfig(min_clique=3)
 
 
 def test_regions_build_cli_builds_once_per_world(tmp_path, capsys):
@@ -167,6 +171,9 @@ class _BallWorld:
         bad = np.flatnonzero(np.linalg.norm(np.atleast_2d(Q) - self.center, axis=1) < self.radius)
         return int(bad[0]) if len(bad) else -1
 
+    def motion_free(self, q0, q1, *, resolution_rad):
+        return self.first_collision(self.interpolate(np.array([q0, q1]), resolution_rad)[1:]) < 0
+
 
 def test_a_region_whose_start_goal_segment_collides_is_cut_keeping_both_covered():
     from planners.gcs_solve import cut_regions
@@ -199,3 +206,61 @@ def test_a_region_cuts_left_empty_is_left_out_of_the_solve():
     traj, result = solve_gcs(A, b, [(0, 1), (1, 0), (1, 2), (2, 1)], np.zeros(7), np.full(7, 1.5))
     assert result.is_success()
     np.testing.assert_allclose(traj.value(traj.end_time()).ravel(), np.full(7, 1.5), atol=1e-6)
+
+
+def _box(lo, hi):
+    return np.vstack([np.eye(7), -np.eye(7)]), np.concatenate([np.asarray(hi, float), -np.asarray(lo, float)])
+
+
+def test_an_end_outside_the_regions_is_joined_by_a_free_segment_to_the_nearest_region_it_reaches():
+    from planners.gcs_solve import connect_ends, join_endpoint
+
+    # Region 0 spans x in [0, 1], region 1 x in [0.8, 3]; both span [-1, 1] in the other joints.
+    (A0, b0), (A1, b1) = _box([0.0] + [-1] * 6, [1.0] + [1] * 6), _box([0.8] + [-1] * 6, [3.0] + [1] * 6)
+    A, b, edges = [A0, A1], [b0, b1], [(0, 1), (1, 0)]
+    q = np.r_[-0.5, np.zeros(6)]  # outside both, 0.5 rad from region 0
+    free = _BallWorld(np.full(7, 50.0), 0.1)
+    regions, p, tried = join_endpoint(A, b, q, world=free, inset_rad=0.02)
+    assert regions == [0] and tried == 1
+    assert np.all(A0 @ p <= b0 + 1e-9) and 0.0 < p[0] <= 0.03  # just inside region 0's face
+    # A ball on that segment: region 0 cannot be reached straight from q; nothing else can either
+    # (region 1 lies behind region 0 along the same line).
+    blocked = _BallWorld(np.r_[-0.25, np.zeros(6)], 0.1)
+    assert join_endpoint(A, b, q, world=blocked)[0] == []
+    # An end inside a region needs no segment.
+    assert join_endpoint(A, b, np.r_[0.9, np.zeros(6)], world=blocked) == ([0, 1], None, 0)
+    # Linked through the region graph: start joined to region 0, goal inside region 1 only.
+    out = connect_ends(A, b, edges, q, np.r_[2.5, np.zeros(6)], world=free)
+    assert out["connected"] and out["start_join"] == "segment" and out["goal_join"] == "inside"
+    assert not connect_ends(A, b, [], q, np.r_[2.5, np.zeros(6)], world=free)["connected"]
+
+
+def test_chain_seeds_contain_consecutive_pieces_of_the_chain_within_the_cap():
+    from planners.gcs_cover import chain_seeds
+
+    chain = np.array([np.zeros(7), np.r_[2.0, np.zeros(6)], np.r_[2.0, 1.2, np.zeros(5)]])
+    seeds = chain_seeds(chain, segment_rad=0.5, max_regions=12)
+    assert len(seeds) == 4 + 3  # 2 rad in pieces of 0.5, then 1.2 rad in pieces of 0.4
+    for (q, C), (_, C_next) in zip(seeds, seeds[1:]):
+        np.testing.assert_allclose(q, C.mean(axis=1))  # the seed is the piece's midpoint
+        np.testing.assert_allclose(C[:, 1], C_next[:, 0])  # consecutive pieces share an end
+    np.testing.assert_allclose(seeds[0][1][:, 0], chain[0])
+    np.testing.assert_allclose(seeds[-1][1][:, 1], chain[-1])
+    assert max(np.linalg.norm(C[:, 1] - C[:, 0]) for _, C in seeds) <= 0.5 + 1e-9
+    assert len(chain_seeds(chain, segment_rad=0.5, max_regions=3)) <= 3  # the cap lengthens the pieces
+
+
+def test_the_task_chain_is_the_worlds_alone(wall_transit):
+    """World seeding reads the scene's task waypoints, never the problem's start or goal: two
+    problems of one world with other ends get the same chain (and the same cache key)."""
+    from planners.gcs_cover import task_chain
+
+    chain, info = task_chain(wall_transit, seed=1234)
+    other = wall_transit.with_(q_start=wall_transit.q_goal, q_goal=wall_transit.q_start)
+    chain2, _ = task_chain(other, seed=1234)
+    assert chain is not None and info["poses_solved"] >= 2
+    np.testing.assert_allclose(chain, chain2)
+    world = collision_world(wall_transit)
+    assert world.path_free(chain, resolution_rad=0.01) < 0  # a free polyline
+    options = GcsConfig().region_options()
+    assert options.seeding == "chain" and world_hash(other, options) == world_hash(wall_transit, options)
