@@ -37,12 +37,16 @@ from typing import ClassVar
 import numpy as np
 
 from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
-from planners.gcs_regions import RegionOptions, RegionSet, problem_hash, regions_for
+from planners.gcs_regions import RegionBuilder, RegionOptions, RegionSet, check_with_world, problem_hash, regions_for
 from planners.gcs_solve import SOLVERS, checked_path, connect_ends
 from planners.worlds import remember
 from scenes.errors import SuiteError
 
 log = logging.getLogger(__name__)
+
+#: The online fallback region around an end no segment joins: IrisZo, one alternation, few
+#: particles (about a second), the Drake checker's padding as offline.
+ONLINE_OPTIONS = RegionOptions(iris="zo", num_particles=100, max_iterations=1, check_rounds=1, check_samples=100)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,6 +68,9 @@ class GcsConfig(RegionOptions):
             `results/regions/` (datasets' `regions/` directories are read too).
         build_regions: build missing regions in `prepare` (offline); otherwise a world without
             cached regions is NO_SOLUTION.
+        online_iris: when no free straight segment joins an end to the regions, grow one small
+            `IrisZo` region around that end online (planning time; its Drake collision checker
+            is built in `prepare`, from the world alone) and join again; False to fail at once.
     """
 
     order: int = 1
@@ -74,6 +81,7 @@ class GcsConfig(RegionOptions):
     check_resolution_rad: float = 0.01
     regions_dir: str = ""
     build_regions: bool = True
+    online_iris: bool = True
 
     def __post_init__(self):
         super().__post_init__()
@@ -102,6 +110,7 @@ class GcsPlanner(PlannerBase):
     def __init__(self, config: GcsConfig | None = None) -> None:
         super().__init__(config)
         self._regions: dict[tuple, tuple[RegionSet | None, dict]] = {}
+        self._online: dict[tuple, object] = {}  # world -> RegionBuilder of online IrisZo regions
 
     def _key(self, problem: PlanningProblem) -> tuple:
         if self.config.seeding != "problem":  # one set per world, whatever the problem
@@ -118,6 +127,8 @@ class GcsPlanner(PlannerBase):
                                build=self.config.build_regions)
         info["prepare_s"] = time.perf_counter() - t0
         remember(self._regions, key, (rs, info), max_items=16)
+        if self.config.online_iris and self.config.seeding != "problem" and problem.world_key() not in self._online:
+            remember(self._online, problem.world_key(), RegionBuilder(problem, ONLINE_OPTIONS), max_items=4)
 
     def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
         cfg = self.config
@@ -149,6 +160,17 @@ class GcsPlanner(PlannerBase):
         # segments where no region holds them.
         joined = connect_ends(A, b, edges, q_start, q_goal, world=world, resolution_rad=cfg.check_resolution_rad,
                               deadline=deadline)
+        seeds = list(rs.seeds)
+        stats["online_regions"] = 0
+        builder = self._online.get(problem.world_key()) if cfg.online_iris else None
+        for name, q in (("start", q_start), ("goal", q_goal)):
+            if joined[f"{name}_join"] != "none" or builder is None or time.perf_counter() >= deadline:
+                continue
+            if _grow_online(A, b, edges, seeds, q, builder=builder, world=world):
+                stats["online_regions"] += 1
+        if stats["online_regions"]:
+            joined = connect_ends(A, b, edges, q_start, q_goal, world=world,
+                                  resolution_rad=cfg.check_resolution_rad, deadline=deadline)
         gcs_ends = joined.pop("ends")
         stats["regions_connected"] = joined.pop("connected")
         stats.update(joined)
@@ -162,7 +184,7 @@ class GcsPlanner(PlannerBase):
             return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
 
         path, solve_stats = checked_path(
-            A, b, edges, rs.seeds, gcs_ends[0], gcs_ends[1], world=world, order=cfg.order,
+            A, b, edges, seeds, gcs_ends[0], gcs_ends[1], world=world, order=cfg.order,
             max_rounded_paths=cfg.max_rounded_paths, solver=cfg.solver, seed=problem.seed,
             max_repairs=cfg.max_repairs, check_resolution_rad=cfg.check_resolution_rad,
             sample_step_rad=cfg.sample_step_rad, deadline=deadline)
@@ -182,3 +204,26 @@ class GcsPlanner(PlannerBase):
             return PlanResult(status, None, stats)
         stats["waypoints"] = len(path)
         return PlanResult(PlanStatus.SUCCESS, path, stats)
+
+
+def _grow_online(A: list, b: list, edges: list, seeds: list, q: np.ndarray, *, builder, world) -> bool:
+    """Grow one IrisZo region around q (planning time), check it with the python-fcl world, and
+    add it to A, b, seeds with its intersection edges (in place). False if IRIS fails."""
+    from pydrake.geometry.optimization import HPolyhedron
+
+    grown = builder.grow(q)
+    if grown is None:
+        return False
+    Ai, bi, _ = grown
+    o = builder.options
+    Ai, bi, _ = check_with_world(Ai, bi, world=world, center=q, keep=[q], samples=o.check_samples,
+                                 rounds=o.check_rounds, margin_rad=o.configuration_space_margin_rad, seed=o.random_seed)
+    new = HPolyhedron(Ai, bi)
+    k = len(A)
+    for j in range(k):
+        if new.IntersectsWith(HPolyhedron(A[j], b[j])):
+            edges += [(k, j), (j, k)]
+    A.append(Ai)
+    b.append(bi)
+    seeds.append(np.asarray(q, float))
+    return True

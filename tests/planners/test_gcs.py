@@ -264,3 +264,26 @@ def test_the_task_chain_is_the_worlds_alone(wall_transit):
     assert world.path_free(chain, resolution_rad=0.01) < 0  # a free polyline
     options = GcsConfig().region_options()
     assert options.seeding == "chain" and world_hash(other, options) == world_hash(wall_transit, options)
+
+
+def test_an_end_no_segment_joins_gets_an_online_region_in_planning_time(wall_transit, tmp_path):
+    """A world whose only region is a small box around the goal: the start's straight segment to
+    it crosses the wall. Without online regions that is `regions_disconnected` at once; with them,
+    an IrisZo region grows around the start (inside the planning time) and holds it."""
+    cfg = GcsConfig(**FAST, regions_dir=str(tmp_path), build_regions=False, online_iris=False)
+    options = cfg.region_options()
+    h = world_hash(wall_transit, options)
+    q1 = np.asarray(wall_transit.q_goal, float)
+    A = np.vstack([np.eye(7), -np.eye(7)])
+    b = np.concatenate([q1 + 0.02, -(q1 - 0.02)])
+    RegionSet(h, [A], [b], [q1], [0.0], offline_s=1.0, edges=[], iris=options.iris,
+              checked=[gcs_regions.WORLD_BUILT]).save(tmp_path / f"{h}.npz")
+    r = GcsPlanner(cfg).plan(wall_transit)
+    assert r.status is PlanStatus.NO_SOLUTION and r.stats["reason_code"] == "regions_disconnected"
+    assert r.stats["start_join"] == "none" and r.stats["goal_join"] == "inside" and r.stats["online_regions"] == 0
+    assert "joins the start" in r.stats["reason"]
+    planner = GcsPlanner(GcsConfig(**FAST, regions_dir=str(tmp_path), build_regions=False))
+    planner.prepare(wall_transit)
+    r = planner.plan(wall_transit)
+    assert r.stats["online_regions"] == 1 and r.stats["start_join"] == "inside"
+    assert r.stats["solve_time_s"] >= r.stats["join_s"] > 0
