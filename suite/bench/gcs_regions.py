@@ -128,7 +128,7 @@ def measure_world(payload: tuple) -> dict:
                     "problem_id": pid, "kind": kind, "status": result.status.value,
                     "valid": result.path is not None and reason is None,
                     "connected": bool(st.get("regions_connected", False)),
-                    "joins": [st.get("start_join"), st.get("goal_join")],
+                    "joins": [st.get("start_join"), st.get("goal_join")], "online_regions": st.get("online_regions"),
                     "planning_s": round(wall, 3), "gcs_first_solve_s": st.get("first_solve_s"),
                     "repairs": st.get("repairs"), "reason_code": st.get("reason_code"),
                 })
