@@ -39,6 +39,8 @@ log = logging.getLogger(__name__)
 
 #: Gripper poses interpolated between consecutive task waypoints (as the cycle's IK continuation).
 POSES_BETWEEN = 2
+#: RRT-Connect attempts (seeds) at joining two consecutive configurations of the chain.
+RRT_ATTEMPTS = 3
 
 
 def _between(X_a: np.ndarray, X_b: np.ndarray, n: int) -> list[np.ndarray]:
@@ -52,8 +54,9 @@ def _between(X_a: np.ndarray, X_b: np.ndarray, n: int) -> list[np.ndarray]:
 
 def task_chain(problem, *, seed: int, rrt_time_s: float = 2.0) -> tuple[np.ndarray | None, dict]:
     """The world's task polyline (K, 7): IK of the task path's gripper poses, joined by free
-    straight segments or RRT-Connect paths. Uses the problem's world only (scene, held can,
-    finger opening, removed cans), never its start or goal.
+    straight segments or RRT-Connect paths (up to RRT_ATTEMPTS seeds of `rrt_time_s` each; a pair
+    none joins stays a blocked segment, counted in `gaps`). Uses the problem's world only (scene,
+    held can, finger opening, removed cans), never its start or goal.
 
     Returns:
         (polyline or None if fewer than two poses have IK, info: ik_s, rrt_s, poses, poses_solved,
@@ -92,10 +95,15 @@ def task_chain(problem, *, seed: int, rrt_time_s: float = 2.0) -> tuple[np.ndarr
         if world.motion_free(a, b, resolution_rad=0.01):
             out.append(b)
             continue
-        path = _rrt_join(problem, a, b, seed=seed, time_s=rrt_time_s)
-        if path is None:
+        path = None
+        for attempt in range(RRT_ATTEMPTS):
+            path = _rrt_join(problem, a, b, seed=seed + attempt, time_s=rrt_time_s)
+            if path is not None:
+                break
+        if path is None:  # left as a blocked segment: its region grows without containment
             info["gaps"] += 1
-            return (np.array(out) if len(out) > 1 else None), info
+            out.append(b)
+            continue
         info["rrt_joins"] += 1
         out += list(shortcut(path, world)[1:])
     info["rrt_s"] = time.perf_counter() - t1
@@ -114,15 +122,27 @@ def _rrt_join(problem, a: np.ndarray, b: np.ndarray, *, seed: int, time_s: float
 
 
 def shortcut(path: np.ndarray, world, *, resolution_rad: float = 0.01) -> np.ndarray:
-    """Greedy shortcutting: from each kept vertex, the farthest later vertex reachable by a free
-    straight motion (python-fcl)."""
-    out, i = [path[0]], 0
-    while i < len(path) - 1:
-        j = len(path) - 1
-        while j > i + 1 and not world.motion_free(path[i], path[j], resolution_rad=resolution_rad):
-            j -= 1
-        out.append(path[j])
-        i = j
+    """Greedy shortcutting: from each kept vertex, a far later vertex reachable by a free straight
+    motion (python-fcl), found by doubling the stride and then bisecting, so a long, dense RRT
+    path costs O(n log n) motion checks, not O(n^2)."""
+    def free(i, j):
+        return world.motion_free(path[i], path[j], resolution_rad=resolution_rad)
+
+    out, i, n = [path[0]], 0, len(path)
+    while i < n - 1:
+        good, step = i + 1, 1
+        while good + step < n and free(i, good + step):
+            good += step
+            step *= 2
+        lo, hi = good, min(good + step, n)  # lo reachable; hi (or beyond) not known to be
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if free(i, mid):
+                lo = mid
+            else:
+                hi = mid
+        out.append(path[lo])
+        i = lo
     return np.array(out)
 
 

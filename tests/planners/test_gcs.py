@@ -287,3 +287,22 @@ def test_an_end_no_segment_joins_gets_an_online_region_in_planning_time(wall_tra
     r = planner.plan(wall_transit)
     assert r.stats["online_regions"] == 1 and r.stats["start_join"] == "inside"
     assert r.stats["solve_time_s"] >= r.stats["join_s"] > 0
+
+
+def test_shortcut_keeps_a_free_polyline_and_drops_what_a_straight_motion_spans():
+    from planners.gcs_cover import shortcut
+
+    # A dense path around a ball: its middle must stay off the ball, its ends are joined straight
+    # wherever the ball allows.
+    world = _BallWorld(np.r_[1.0, np.zeros(6)], 0.3)
+    t = np.linspace(0.0, np.pi, 200)
+    path = np.zeros((200, 7))
+    path[:, 0] = 1.0 - np.cos(t)  # from x = 0 to x = 2, bulging to y = 0.6 around the ball
+    path[:, 1] = 0.6 * np.sin(t)
+    out = shortcut(path, world)
+    assert 2 < len(out) < 20
+    np.testing.assert_allclose(out[0], path[0])
+    np.testing.assert_allclose(out[-1], path[-1])
+    assert all(world.motion_free(a, b, resolution_rad=0.01) for a, b in zip(out, out[1:]))
+    free = _BallWorld(np.full(7, 50.0), 0.1)
+    assert len(shortcut(path, free)) == 2  # nothing in the way: one straight segment
