@@ -156,13 +156,31 @@ def split_polyline(path: np.ndarray, max_step_rad: float) -> np.ndarray:
 
 
 def chain_seeds(chain: np.ndarray, *, segment_rad: float, max_regions: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(seed, containment points (7, 2)) per region: the midpoint of each segment of the chain
-    cut into pieces of at most `segment_rad` (fewer, longer pieces if that gives more than
-    `max_regions`)."""
+    """(seed, containment points (7, m)) per region: the chain cut into pieces of at most
+    `segment_rad` (longer pieces if that gives more than `max_regions`), the seed at each piece's
+    midpoint and its two ends to contain. A chain with more segments than `max_regions` (an
+    RRT-joined stretch) is cut by arc length into `max_regions` stretches instead: the seed at a
+    stretch's middle (on the chain) and its vertices to contain (IRIS grows the region without
+    containment if their hull collides)."""
+    if len(chain) - 1 > max_regions:
+        seg = np.linalg.norm(np.diff(chain, axis=0), axis=1)
+        cum = np.concatenate([[0.0], np.cumsum(seg)])
+        cuts = np.linspace(0.0, cum[-1], max_regions + 1)
+
+        def at(s: float) -> np.ndarray:
+            i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
+            return chain[i] + (s - cum[i]) / max(seg[i], 1e-12) * (chain[i + 1] - chain[i])
+
+        out = []
+        for s0, s1 in zip(cuts, cuts[1:]):
+            inner = [chain[k] for k in range(len(chain)) if s0 < cum[k] < s1]
+            pts = [at(s0), *inner, at(s1)]
+            out.append((at(0.5 * (s0 + s1)), np.column_stack(pts)))
+        return out
     length = float(np.sum(np.linalg.norm(np.diff(chain, axis=0), axis=1)))
     step = max(segment_rad, length / max_regions)
     pts = split_polyline(chain, step)
-    while len(pts) - 1 > max_regions:  # the chain's own vertices add pieces
+    while len(pts) - 1 > max_regions:  # the chain's own vertices add pieces (at most max_regions of them)
         step *= 1.15
         pts = split_polyline(chain, step)
     return [(0.5 * (a + b), np.column_stack([a, b])) for a, b in zip(pts, pts[1:])]

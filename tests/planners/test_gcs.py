@@ -306,3 +306,19 @@ def test_shortcut_keeps_a_free_polyline_and_drops_what_a_straight_motion_spans()
     assert all(world.motion_free(a, b, resolution_rad=0.01) for a, b in zip(out, out[1:]))
     free = _BallWorld(np.full(7, 50.0), 0.1)
     assert len(shortcut(path, free)) == 2  # nothing in the way: one straight segment
+
+
+def test_a_chain_with_more_segments_than_regions_is_cut_by_arc_length():
+    from planners.gcs_cover import chain_seeds
+
+    t = np.linspace(0.0, np.pi, 30)  # 29 segments, 8 regions at most
+    chain = np.zeros((30, 7))
+    chain[:, 0], chain[:, 1] = np.cos(t), np.sin(t)
+    seeds = chain_seeds(chain, segment_rad=0.5, max_regions=8)
+    assert len(seeds) == 8
+    np.testing.assert_allclose(seeds[0][1][:, 0], chain[0])
+    np.testing.assert_allclose(seeds[-1][1][:, -1], chain[-1], atol=1e-12)
+    for (_, C), (_, C_next) in zip(seeds, seeds[1:]):
+        np.testing.assert_allclose(C[:, -1], C_next[:, 0])  # consecutive stretches share an end
+    for q, _ in seeds:  # every seed lies on the chain (the unit circle in the first two joints)
+        assert abs(np.hypot(q[0], q[1]) - 1.0) < 0.01
