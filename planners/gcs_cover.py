@@ -160,8 +160,8 @@ def chain_seeds(chain: np.ndarray, *, segment_rad: float, max_regions: int) -> l
     `segment_rad` (longer pieces if that gives more than `max_regions`), the seed at each piece's
     midpoint and its two ends to contain. A chain with more segments than `max_regions` (an
     RRT-joined stretch) is cut by arc length into `max_regions` stretches instead: the seed at a
-    stretch's middle (on the chain) and its vertices to contain (IRIS grows the region without
-    containment if their hull collides)."""
+    stretch's middle (on the chain) and the stretch's two ends to contain (IRIS grows the region
+    without containment if the segment between them collides)."""
     if len(chain) - 1 > max_regions:
         seg = np.linalg.norm(np.diff(chain, axis=0), axis=1)
         cum = np.concatenate([[0.0], np.cumsum(seg)])
@@ -171,12 +171,9 @@ def chain_seeds(chain: np.ndarray, *, segment_rad: float, max_regions: int) -> l
             i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(seg) - 1))
             return chain[i] + (s - cum[i]) / max(seg[i], 1e-12) * (chain[i + 1] - chain[i])
 
-        out = []
-        for s0, s1 in zip(cuts, cuts[1:]):
-            inner = [chain[k] for k in range(len(chain)) if s0 < cum[k] < s1]
-            pts = [at(s0), *inner, at(s1)]
-            out.append((at(0.5 * (s0 + s1)), np.column_stack(pts)))
-        return out
+        # Only the stretch's ends are contained: with its inner vertices too, IrisNp2 aborted
+        # (Drake 1.51, ComputeFaceTangentToDistCvxh) on a window world's RRT-joined stretch.
+        return [(at(0.5 * (s0 + s1)), np.column_stack([at(s0), at(s1)])) for s0, s1 in zip(cuts, cuts[1:])]
     length = float(np.sum(np.linalg.norm(np.diff(chain, axis=0), axis=1)))
     step = max(segment_rad, length / max_regions)
     pts = split_polyline(chain, step)
