@@ -54,8 +54,9 @@ def _between(X_a: np.ndarray, X_b: np.ndarray, n: int) -> list[np.ndarray]:
 
 def task_chain(problem, *, seed: int, rrt_time_s: float = 2.0) -> tuple[np.ndarray | None, dict]:
     """The world's task polyline (K, 7): IK of the task path's gripper poses, joined by free
-    straight segments or RRT-Connect paths (up to RRT_ATTEMPTS seeds of `rrt_time_s` each; a pair
-    none joins stays a blocked segment, counted in `gaps`). Uses the problem's world only (scene,
+    straight segments or RRT-Connect paths (the shortest, once shortcut, of RRT_ATTEMPTS seeds of
+    `rrt_time_s` each; a pair none joins stays a blocked segment, counted in `gaps`). A pose whose
+    IK near the previous configuration fails is solved with restarts. Uses the problem's world only (scene,
     held can, finger opening, removed cans), never its start or goal.
 
     Returns:
@@ -72,7 +73,6 @@ def task_chain(problem, *, seed: int, rrt_time_s: float = 2.0) -> tuple[np.ndarr
     X_plate, X_middle, X_bin = (waypoint_pose(p) for p in (wp.above_plate_m, wp.middle_m, wp.above_bin_m))
     poses = [X_plate, *_between(X_plate, X_middle, POSES_BETWEEN), X_middle,
              *_between(X_middle, X_bin, POSES_BETWEEN), X_bin]
-    named = {0, POSES_BETWEEN + 1, len(poses) - 1}  # the scene's own waypoints: worth restarts
     ik = PoseIk(drake_plan_scene(problem))
     rng = np.random.default_rng([seed, 31])
     near = IkOptions(restarts=0, near_sigmas_rad=(0.1,), major_iterations=30, min_distance_m=0.002)
@@ -80,7 +80,7 @@ def task_chain(problem, *, seed: int, rrt_time_s: float = 2.0) -> tuple[np.ndarr
     q, vertices = Q_READY, []
     for k, X in enumerate(poses):
         qn = ik.solve(X, q_seed=q, rng=rng, options=full if k == 0 else near)
-        if qn is None and k in named and k > 0:
+        if qn is None and k > 0:  # off the branch: restarts (kept nearest the previous one)
             qn = ik.solve(X, q_seed=q, rng=rng, options=full)
         if qn is not None and world.is_free(qn):
             vertices.append(np.asarray(qn, float))
@@ -95,17 +95,18 @@ def task_chain(problem, *, seed: int, rrt_time_s: float = 2.0) -> tuple[np.ndarr
         if world.motion_free(a, b, resolution_rad=0.01):
             out.append(b)
             continue
-        path = None
+        found = []  # the shortest of RRT_ATTEMPTS shortcut RRT-Connect paths (RRT paths wander)
         for attempt in range(RRT_ATTEMPTS):
             path = _rrt_join(problem, a, b, seed=seed + attempt, time_s=rrt_time_s)
             if path is not None:
-                break
-        if path is None:  # left as a blocked segment: its region grows without containment
+                path = shortcut(path, world)
+                found.append((float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))), attempt, path))
+        if not found:  # left as a blocked segment: its region grows without containment
             info["gaps"] += 1
             out.append(b)
             continue
         info["rrt_joins"] += 1
-        out += list(shortcut(path, world)[1:])
+        out += list(min(found, key=lambda t: t[:2])[2][1:])
     info["rrt_s"] = time.perf_counter() - t1
     return np.array(out), info
 
@@ -159,10 +160,15 @@ def chain_seeds(chain: np.ndarray, *, segment_rad: float, max_regions: int) -> l
     """(seed, containment points (7, m)) per region: the chain cut into pieces of at most
     `segment_rad` (longer pieces if that gives more than `max_regions`), the seed at each piece's
     midpoint and its two ends to contain. A chain with more segments than `max_regions` (an
-    RRT-joined stretch) is cut by arc length into `max_regions` stretches instead: the seed at a
-    stretch's middle (on the chain) and the stretch's two ends to contain (IRIS grows the region
-    without containment if the segment between them collides)."""
+    RRT-joined stretch) gets one region per segment, up to twice `max_regions`; beyond that it is
+    cut by arc length into `max_regions` stretches: the seed at a stretch's middle (on the chain)
+    and the stretch's two ends to contain (IRIS grows the region without containment if the
+    segment between them collides)."""
     if len(chain) - 1 > max_regions:
+        if len(chain) - 1 <= 2 * max_regions:
+            # One region per segment: each contains its (free) segment, so they chain up; more
+            # regions cost GCS time, but stretches between non-adjacent vertices would not chain.
+            return [(0.5 * (a + b), np.column_stack([a, b])) for a, b in zip(chain, chain[1:])]
         seg = np.linalg.norm(np.diff(chain, axis=0), axis=1)
         cum = np.concatenate([[0.0], np.cumsum(seg)])
         cuts = np.linspace(0.0, cum[-1], max_regions + 1)

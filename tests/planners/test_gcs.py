@@ -247,7 +247,13 @@ def test_chain_seeds_contain_consecutive_pieces_of_the_chain_within_the_cap():
     np.testing.assert_allclose(seeds[0][1][:, 0], chain[0])
     np.testing.assert_allclose(seeds[-1][1][:, 1], chain[-1])
     assert max(np.linalg.norm(C[:, 1] - C[:, 0]) for _, C in seeds) <= 0.5 + 1e-9
-    assert len(chain_seeds(chain, segment_rad=0.5, max_regions=3)) <= 3  # the cap lengthens the pieces
+    assert len(chain_seeds(chain, segment_rad=0.5, max_regions=3)) == 3  # the cap lengthens the pieces
+    # More chain segments than the cap (up to twice it): one region per segment, each holding it.
+    zigzag = np.array([np.r_[k * 0.3, (k % 2) * 0.3, np.zeros(5)] for k in range(12)])  # 11 segments
+    seeds = chain_seeds(zigzag, segment_rad=0.5, max_regions=8)
+    assert len(seeds) == 11
+    for (q, C), a, b in zip(seeds, zigzag, zigzag[1:]):
+        np.testing.assert_allclose(C, np.column_stack([a, b]))
 
 
 def test_the_task_chain_is_the_worlds_alone(wall_transit):
