@@ -120,7 +120,8 @@ def usable_regions(A: list, b: list) -> list[int]:
 
 
 def join_endpoint(A: list, b: list, q: np.ndarray, *, world, resolution_rad: float = 0.01,
-                  inset_rad: float = 0.02, deadline: float = float("inf")) -> tuple[list[int], np.ndarray | None, int]:
+                  inset_rad: float = 0.02, deadline: float = float("inf"),
+                  among: set[int] | None = None) -> tuple[list[int], np.ndarray | None, int]:
     """Join a configuration to the regions {A_i q <= b_i} online (planning time).
 
     If regions hold q, nothing is added. Otherwise, regions are tried in order of their distance
@@ -130,6 +131,9 @@ def join_endpoint(A: list, b: list, q: np.ndarray, *, world, resolution_rad: flo
     point and the segment is prepended (appended). (A segment as one more convex set of the graph,
     a VPolytope of its two ends, made Drake's relaxation infeasible in our trials.)
 
+    With `among`, only those regions are considered, and by a segment even if another region
+    holds q (to reach the other end's part of a disconnected region graph).
+
     Returns:
         (regions holding q or entered by the segment, the segment's far end or None if q is held,
         regions tried). ([], None, tried) when nothing joins q.
@@ -138,10 +142,12 @@ def join_endpoint(A: list, b: list, q: np.ndarray, *, world, resolution_rad: flo
 
     q = np.asarray(q, float)
     holding = [i for i in range(len(A)) if np.all(A[i] @ q <= b[i] + 1e-9)]
-    if holding:
+    if holding and among is None:
         return holding, None, 0
     near = []
     for i in usable_regions(A, b):
+        if among is not None and (i not in among or i in holding):
+            continue
         poly = HPolyhedron(np.asarray(A[i], float), np.asarray(b[i], float))
         found = poly.Projection(q.reshape(-1, 1))
         if found is None:
@@ -182,24 +188,39 @@ def connect_ends(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.
         out["ends"].append(np.asarray(q if p is None else p, float))
         held.append(regions)
     out["connected"] = bool(held[0] and held[1] and linked(edges, held[0], held[1]))
+    if held[0] and held[1] and not out["connected"]:
+        # The ends sit in parts of the region graph that do not meet: join one end by a free
+        # segment straight into the other end's part.
+        for k, (name, q) in enumerate((("start", q_start), ("goal", q_goal))):
+            other = reachable(edges, held[1 - k])
+            regions, p, tried = join_endpoint(A, b, q, world=world, resolution_rad=resolution_rad,
+                                              deadline=deadline, among=other)
+            out[f"{name}_join_tried"] += tried
+            if regions:
+                out[f"{name}_join"] = "segment"
+                out["ends"][k] = np.asarray(p, float)
+                out["connected"] = True
+                break
     return out
+
+
+def reachable(edges: list, starts: list[int]) -> set[int]:
+    """The regions the directed region graph `edges` leads to from `starts` (them included)."""
+    adjacency: dict[int, list[int]] = {}
+    for i, j in edges:
+        adjacency.setdefault(i, []).append(j)
+    seen, frontier = set(starts), list(starts)
+    while frontier:
+        for j in adjacency.get(frontier.pop(), []):
+            if j not in seen:
+                seen.add(j)
+                frontier.append(j)
+    return seen
 
 
 def linked(edges: list, starts: list[int], targets: list[int]) -> bool:
     """Whether the directed region graph `edges` leads from a region of `starts` to one of `targets`."""
-    adjacency: dict[int, list[int]] = {}
-    for i, j in edges:
-        adjacency.setdefault(i, []).append(j)
-    goal, seen, frontier = set(targets), set(starts), list(starts)
-    while frontier:
-        i = frontier.pop()
-        if i in goal:
-            return True
-        for j in adjacency.get(i, []):
-            if j not in seen:
-                seen.add(j)
-                frontier.append(j)
-    return False
+    return bool(reachable(edges, starts) & set(targets))
 
 
 def _solver(name: str):

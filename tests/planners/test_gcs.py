@@ -232,7 +232,13 @@ def test_an_end_outside_the_regions_is_joined_by_a_free_segment_to_the_nearest_r
     # Linked through the region graph: start joined to region 0, goal inside region 1 only.
     out = connect_ends(A, b, edges, q, np.r_[2.5, np.zeros(6)], world=free)
     assert out["connected"] and out["start_join"] == "segment" and out["goal_join"] == "inside"
-    assert not connect_ends(A, b, [], q, np.r_[2.5, np.zeros(6)], world=free)["connected"]
+    # Without the edge, the start is joined straight into the goal's region instead; if that
+    # longer segment is blocked, the goal is joined into the start's region.
+    out = connect_ends(A, b, [], q, np.r_[2.5, np.zeros(6)], world=free)
+    assert out["connected"] and np.all(A1 @ out["ends"][0] <= b1 + 1e-9)
+    beyond = _BallWorld(np.r_[0.5, np.zeros(6)], 0.1)
+    out = connect_ends(A, b, [], q, np.r_[2.5, np.zeros(6)], world=beyond)
+    assert out["connected"] and out["goal_join"] == "segment" and np.all(A0 @ out["ends"][1] <= b0 + 1e-9)
 
 
 def test_chain_seeds_contain_consecutive_pieces_of_the_chain_within_the_cap():
@@ -328,3 +334,18 @@ def test_a_chain_with_more_segments_than_regions_is_cut_by_arc_length():
         np.testing.assert_allclose(C[:, -1], C_next[:, 0])  # consecutive stretches share an end
     for q, _ in seeds:  # every seed lies on the chain (the unit circle in the first two joints)
         assert abs(np.hypot(q[0], q[1]) - 1.0) < 0.01
+
+
+def test_ends_in_parts_of_the_graph_that_do_not_meet_are_joined_across_by_a_segment():
+    from planners.gcs_solve import connect_ends
+
+    # Region 0: x in [0, 1]; region 1: x in [1.5, 3]; no edge. The start (x = 0.9) is in region 0,
+    # the goal (x = 2.5) in region 1; a free straight segment from the start reaches region 1.
+    (A0, b0), (A1, b1) = _box([0.0] + [-1] * 6, [1.0] + [1] * 6), _box([1.5] + [-1] * 6, [3.0] + [1] * 6)
+    q0, q1 = np.r_[0.9, np.zeros(6)], np.r_[2.5, np.zeros(6)]
+    free = _BallWorld(np.full(7, 50.0), 0.1)
+    out = connect_ends([A0, A1], [b0, b1], [], q0, q1, world=free)
+    assert out["connected"] and out["start_join"] == "segment" and out["goal_join"] == "inside"
+    assert np.all(A1 @ out["ends"][0] <= b1 + 1e-9)  # GCS starts just inside region 1
+    blocked = _BallWorld(np.r_[1.25, np.zeros(6)], 0.2)  # between the two regions
+    assert not connect_ends([A0, A1], [b0, b1], [], q0, q1, world=blocked)["connected"]
