@@ -349,3 +349,23 @@ def test_ends_in_parts_of_the_graph_that_do_not_meet_are_joined_across_by_a_segm
     assert np.all(A1 @ out["ends"][0] <= b1 + 1e-9)  # GCS starts just inside region 1
     blocked = _BallWorld(np.r_[1.25, np.zeros(6)], 0.2)  # between the two regions
     assert not connect_ends([A0, A1], [b0, b1], [], q0, q1, world=blocked)["connected"]
+
+
+@pytest.mark.slow
+def test_world_regions_carry_a_window_return_through_the_opening(tmp_path):
+    """The narrow passage (issue 31): a `window` return of recycle-v3's quick tier, regions built
+    from its world alone (the task chain), planned by gcs and accepted by the validator."""
+    from suite.problems.dataset import load_dataset
+
+    ds = load_dataset("recycle-v3:quick")
+    pid = next(i for i in ds.ids if ds.meta[i]["family"] == "window" and ds.meta[i]["kind"] == "return")
+    problem = ds.problems[ds.ids.index(pid)]
+    cfg = GcsConfig(regions_dir=str(tmp_path))
+    rs, info = gcs_regions.regions_for(problem, cfg.region_options(), cache_dir=tmp_path, fresh=True)
+    assert info["build"]["ends_connected"] and 2 <= len(rs) <= 2 * cfg.max_regions_per_world
+    planner = GcsPlanner(cfg)
+    planner.prepare(problem)
+    r = planner.plan(problem)
+    assert r.status is PlanStatus.SUCCESS, r.stats
+    assert validate_path(problem, r.path, collision_world(problem)) is None
+    assert r.stats["regions_cache"] == "hit" and r.stats["offline_s"] == pytest.approx(rs.offline_s)
