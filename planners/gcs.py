@@ -2,22 +2,26 @@
 
 Marcucci et al., "Motion planning around obstacles with convex optimization" (Science Robotics
 2023). The configuration space is covered by collision-free convex regions (sampled IRIS, see
-`planners.gcs_regions`), built offline once per collision world and cached on disk; `prepare`
-loads them (or builds them on a miss) before the trial's clock starts, and their build time is
-reported as `stats.offline_s`, never as planning time.
+`planners.gcs_regions`), built offline once per collision world from the world alone (its task
+chain, `planners.gcs_cover`; `seeding`) and cached on disk; `prepare` loads them (or builds them
+on a miss) before the trial's clock starts, and their build time is reported as
+`stats.offline_s`, never as planning time.
 
-Online, one Bezier curve per visited region (order 1 by default: straight segments, so the cost
-is exactly the joint-space path length), start and goal as point regions of order 0, joined
+Online (planning time), start and goal are joined to the regions: an end no region holds is
+joined by a straight segment, free in the python-fcl world, to a point just inside the nearest
+region it can reach (`planners.gcs_solve.join_endpoint`); if none, the trial is NO_SOLUTION with
+`regions_disconnected`. Then one Bezier curve per visited region (order 1 by default: straight
+segments, so the cost is exactly the joint-space path length) between the joined ends, joined
 where regions intersect; the shortest path is found by the convex relaxation of the
 mixed-integer program followed by randomized rounding and a convex restriction on each rounded
-path, solved by Clarabel (ships with Drake). The time-free path is the curve sampled densely;
-the suite times it with TOPP-RA. Sampled IRIS regions are not certified collision-free: the path
-is checked with the python-fcl world at the validator's resolution, and where it collides that
-configuration is cut off (in-memory copies of) the regions holding it and GCS is solved again
-(`max_repairs`, planning time); a path still colliding after `max_repairs` is NO_SOLUTION, and
-repairs stopped by the planning budget are TIMEOUT. With `max_repairs=0` the
-path is returned unchecked and the suite's validator judges it (a collision is
-`invalid_solution`), as it judges every planner's path anyway.
+path, solved by Clarabel (ships with Drake). The time-free path is the curve sampled densely,
+with the joining segments at its ends; the suite times it with TOPP-RA. Sampled IRIS regions are
+not certified collision-free: the path is checked with the python-fcl world at the validator's
+resolution, and where it collides that configuration is cut off (in-memory copies of) the regions
+holding it and GCS is solved again (`max_repairs`, planning time); a path still colliding after
+`max_repairs` is NO_SOLUTION, and repairs stopped by the planning budget are TIMEOUT. With
+`max_repairs=0` the path is returned unchecked and the suite's validator judges it (a collision
+is `invalid_solution`), as it judges every planner's path anyway.
 
 Building regions inside a `compare` trial counts against the trial's hard limit (3 x budget +
 30 s): build them ahead with `python -m suite regions build --dataset NAME`.
@@ -33,12 +37,16 @@ from typing import ClassVar
 import numpy as np
 
 from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
-from planners.gcs_regions import RegionOptions, RegionSet, problem_hash, regions_for
-from planners.gcs_solve import SOLVERS, checked_path
+from planners.gcs_regions import RegionBuilder, RegionOptions, RegionSet, check_with_world, problem_hash, regions_for
+from planners.gcs_solve import SOLVERS, checked_path, connect_ends
 from planners.worlds import remember
 from scenes.errors import SuiteError
 
 log = logging.getLogger(__name__)
+
+#: The online fallback region around an end no segment joins: IrisZo, one alternation, few
+#: particles (about a second), the Drake checker's padding as offline.
+ONLINE_OPTIONS = RegionOptions(iris="zo", num_particles=100, max_iterations=1, check_rounds=1, check_samples=100)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,6 +68,9 @@ class GcsConfig(RegionOptions):
             `results/regions/` (datasets' `regions/` directories are read too).
         build_regions: build missing regions in `prepare` (offline); otherwise a world without
             cached regions is NO_SOLUTION.
+        online_iris: when no free straight segment joins an end to the regions, grow one small
+            `IrisZo` region around that end online (planning time; its Drake collision checker
+            is built in `prepare`, from the world alone) and join again; False to fail at once.
     """
 
     order: int = 1
@@ -70,6 +81,7 @@ class GcsConfig(RegionOptions):
     check_resolution_rad: float = 0.01
     regions_dir: str = ""
     build_regions: bool = True
+    online_iris: bool = True
 
     def __post_init__(self):
         super().__post_init__()
@@ -98,8 +110,11 @@ class GcsPlanner(PlannerBase):
     def __init__(self, config: GcsConfig | None = None) -> None:
         super().__init__(config)
         self._regions: dict[tuple, tuple[RegionSet | None, dict]] = {}
+        self._online: dict[tuple, object] = {}  # world -> RegionBuilder of online IrisZo regions
 
     def _key(self, problem: PlanningProblem) -> tuple:
+        if self.config.seeding != "problem":  # one set per world, whatever the problem
+            return (problem.world_key(),)
         return (problem.world_key(), problem_hash(problem))
 
     def prepare(self, problem: PlanningProblem) -> None:
@@ -112,6 +127,8 @@ class GcsPlanner(PlannerBase):
                                build=self.config.build_regions)
         info["prepare_s"] = time.perf_counter() - t0
         remember(self._regions, key, (rs, info), max_items=16)
+        if self.config.online_iris and self.config.seeding != "problem" and problem.world_key() not in self._online:
+            remember(self._online, problem.world_key(), RegionBuilder(problem, ONLINE_OPTIONS), max_items=4)
 
     def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
         cfg = self.config
@@ -137,20 +154,43 @@ class GcsPlanner(PlannerBase):
             return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
         q_start = np.asarray(problem.q_start, float)
         q_goal = np.asarray(problem.q_goal, float)
-        stats["regions_connected"] = rs.connected(q_start, q_goal)
+        A, b = list(rs.A), list(rs.b)  # repairs cut these copies, not the cached set
+        edges = list(rs.edges)
+        # Online (planning time): join start and goal to the world's regions by free straight
+        # segments where no region holds them.
+        joined = connect_ends(A, b, edges, q_start, q_goal, world=world, resolution_rad=cfg.check_resolution_rad,
+                              deadline=deadline)
+        seeds = list(rs.seeds)
+        stats["online_regions"] = 0
+        builder = self._online.get(problem.world_key()) if cfg.online_iris else None
+        for name, q in (("start", q_start), ("goal", q_goal)):
+            if joined[f"{name}_join"] != "none" or builder is None or time.perf_counter() >= deadline:
+                continue
+            if _grow_online(A, b, edges, seeds, q, builder=builder, world=world):
+                stats["online_regions"] += 1
+        if stats["online_regions"]:
+            joined = connect_ends(A, b, edges, q_start, q_goal, world=world,
+                                  resolution_rad=cfg.check_resolution_rad, deadline=deadline)
+        gcs_ends = joined.pop("ends")
+        stats["regions_connected"] = joined.pop("connected")
+        stats.update(joined)
+        stats["join_s"] = time.perf_counter() - t0
         if not stats["regions_connected"]:
-            stats["reason"] = "the regions do not connect start and goal"
+            unjoined = [n for n in ("start", "goal") if stats[f"{n}_join"] == "none"]
+            stats["reason"] = (f"no free straight segment joins the {unjoined[0]} to the regions" if unjoined
+                               else "the regions do not connect start and goal")
             stats["reason_code"] = FailureReason.REGIONS_DISCONNECTED.value
             stats["solve_time_s"] = time.perf_counter() - t0
             return PlanResult(PlanStatus.NO_SOLUTION, None, stats)
 
-        A, b = list(rs.A), list(rs.b)  # repairs cut these copies, not the cached set
-        edges = list(rs.edges)
         path, solve_stats = checked_path(
-            A, b, edges, rs.seeds, q_start, q_goal, world=world, order=cfg.order,
+            A, b, edges, seeds, gcs_ends[0], gcs_ends[1], world=world, order=cfg.order,
             max_rounded_paths=cfg.max_rounded_paths, solver=cfg.solver, seed=problem.seed,
             max_repairs=cfg.max_repairs, check_resolution_rad=cfg.check_resolution_rad,
-            sample_step_rad=cfg.sample_step_rad, deadline=t0 + problem.time_limit_s)
+            sample_step_rad=cfg.sample_step_rad, deadline=deadline)
+        if path is not None:  # the joining segments, checked free above
+            path = np.vstack([[q_start]] * (stats["start_join"] == "segment") + [path]
+                             + [[q_goal]] * (stats["goal_join"] == "segment"))
         stats.update(solve_stats)
         stats["solve_time_s"] = time.perf_counter() - t0
         if path is None:
@@ -164,3 +204,26 @@ class GcsPlanner(PlannerBase):
             return PlanResult(status, None, stats)
         stats["waypoints"] = len(path)
         return PlanResult(PlanStatus.SUCCESS, path, stats)
+
+
+def _grow_online(A: list, b: list, edges: list, seeds: list, q: np.ndarray, *, builder, world) -> bool:
+    """Grow one IrisZo region around q (planning time), check it with the python-fcl world, and
+    add it to A, b, seeds with its intersection edges (in place). False if IRIS fails."""
+    from pydrake.geometry.optimization import HPolyhedron
+
+    grown = builder.grow(q)
+    if grown is None:
+        return False
+    Ai, bi, _ = grown
+    o = builder.options
+    Ai, bi, _ = check_with_world(Ai, bi, world=world, center=q, keep=[q], samples=o.check_samples,
+                                 rounds=o.check_rounds, margin_rad=o.configuration_space_margin_rad, seed=o.random_seed)
+    new = HPolyhedron(Ai, bi)
+    k = len(A)
+    for j in range(k):
+        if new.IntersectsWith(HPolyhedron(A[j], b[j])):
+            edges += [(k, j), (j, k)]
+    A.append(Ai)
+    b.append(bi)
+    seeds.append(np.asarray(q, float))
+    return True

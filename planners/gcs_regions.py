@@ -5,7 +5,10 @@ plan-mode Drake scene of a problem's collision world (`scenes.drake_scene.add_sc
 `RobotDiagramBuilder` because the collision checker needs a `RobotDiagram`): the held can and the
 finger opening are part of the robot, removed cans are gone.
 
-Seeding, per problem of the world (offline, before any trial's clock):
+Seeding. By default from the world alone (`seeding` "chain" or "cliques", `planners.gcs_cover`,
+`grow_for_world`): no problem's start, goal or path enters the regions, and joining a problem's
+ends to them is `gcs`'s online work. The earlier rule, `seeding: problem` (kept to reproduce its
+figures), seeds per problem of the world (offline, before any trial's clock):
 1. the problem's start and goal configurations;
 2. a guide path between them: the straight joint-space segment if the python-fcl world finds it
    free, otherwise an RRT-Connect path (OMPL, python-fcl) with a fixed seed;
@@ -51,6 +54,12 @@ log = logging.getLogger(__name__)
 
 FORMAT_VERSION = 1
 IRIS_ALGORITHMS = ("np2", "zo")
+#: How seeds are chosen: from the world alone ("chain", "cliques", see `planners.gcs_cover`), or
+#: from each problem's start, goal and a guide between them ("problem", the earlier rule: it uses
+#: the problems, so its regions are not the world's alone).
+SEEDINGS = ("chain", "cliques", "problem")
+#: The mark in `RegionSet.checked` of a set built from its world alone.
+WORLD_BUILT = "world"
 #: Default cache of regions built on demand (results/ is generated output, not committed).
 DEFAULT_CACHE_DIR = Path(__file__).resolve().parents[1] / "results" / "regions"
 #: Datasets may carry their own prebuilt regions (`python -m suite regions build --dataset NAME`).
@@ -81,13 +90,30 @@ class RegionOptions:
             the padding (a grasp between cans) is grown again without it.
         seed_radius_rad: radius of the starting hypersphere around a seed (rad).
         guide_step_rad: spacing of the configurations tested along a guide path (joint L2, rad).
-        guide_rrt_time_s: budget of the RRT-Connect guide path (s).
-        max_regions_per_problem: regions a problem may add (start, goal and connection).
+        guide_rrt_time_s: budget of an RRT-Connect guide path (s): per problem ("problem"
+            seeding), or per blocked join of the world's task chain (world seedings).
+        max_regions_per_problem: regions a problem may add (start, goal and connection;
+            "problem" seeding only).
         check_samples, check_rounds: each region is sampled uniformly (`check_samples` per
             round) and checked with the python-fcl world, the validator's engine; faces are added
             to cut off what collides, for up to `check_rounds` rounds (0 to skip).
         random_seed: IRIS's random seed.
         threads: threads of one IRIS call (its collision checks).
+        seeding: "chain" (default: regions along the world's task chain, each containing one
+            segment of it), "cliques" (a visibility clique cover of samples of the task's
+            neighbourhood), both from the world alone (`planners.gcs_cover`); or "problem" (seeds
+            at each problem's start, goal and along a guide between them, offline: the earlier
+            rule, which uses the problems).
+        segment_rad: longest chain segment one region must contain ("chain").
+        max_regions_per_world: cap on a world's regions (world seedings). GCS's cost grows with
+            the edges between overlapping regions: on a `window` world, 12 chain regions (37
+            edges) took 2.3 s a solve, 8 (14 edges) 0.2 s, for a path 6% longer.
+        sample_sigma_rad: per-joint standard deviation of the task-neighbourhood samples around
+            the task chain ("cliques"; also the coverage estimate of `suite bench gcs-regions`).
+        clique_samples: collision-free samples per clique-cover round ("cliques").
+        min_clique: smallest clique that makes a region ("cliques"; at least 8 in 7-D).
+        coverage: stop the clique cover once this fraction of fresh task-neighbourhood samples
+            lies in some region ("cliques").
     """
 
     iris: str = "np2"
@@ -107,19 +133,32 @@ class RegionOptions:
     check_rounds: int = 2
     random_seed: int = 1234
     threads: int = 1
+    seeding: str = "chain"
+    segment_rad: float = 0.5
+    max_regions_per_world: int = 8
+    sample_sigma_rad: float = 0.25
+    clique_samples: int = 200
+    min_clique: int = 10
+    coverage: float = 0.7
 
     def __post_init__(self):
         if self.iris not in IRIS_ALGORITHMS:
             raise SuiteError(f"gcs iris={self.iris!r}; allowed: {', '.join(IRIS_ALGORITHMS)}")
+        if self.seeding not in SEEDINGS:
+            raise SuiteError(f"gcs seeding={self.seeding!r}; allowed: {', '.join(SEEDINGS)}")
+        if not 0 < self.coverage <= 1:
+            raise SuiteError(f"gcs coverage={self.coverage!r} must be in (0, 1]")
+        if self.min_clique < 8:
+            raise SuiteError(f"gcs min_clique={self.min_clique!r} must be >= 8 (a 7-D ellipsoid needs 8 points)")
         for name in ("num_particles", "max_iterations", "max_iterations_separating_planes",
                      "max_separating_planes_per_iteration", "max_regions_per_problem", "threads",
-                     "check_samples"):
+                     "check_samples", "max_regions_per_world", "clique_samples"):
             if getattr(self, name) < 1:
                 raise SuiteError(f"gcs {name}={getattr(self, name)!r} must be >= 1")
         for name in ("epsilon", "delta"):
             if not 0 < getattr(self, name) < 1:
                 raise SuiteError(f"gcs {name}={getattr(self, name)!r} must be in (0, 1)")
-        for name in ("seed_radius_rad", "guide_step_rad", "guide_rrt_time_s"):
+        for name in ("seed_radius_rad", "guide_step_rad", "guide_rrt_time_s", "segment_rad", "sample_sigma_rad"):
             if not getattr(self, name) > 0:
                 raise SuiteError(f"gcs {name}={getattr(self, name)!r} must be positive")
         for name in ("configuration_space_margin_rad", "padding_m", "check_rounds"):
@@ -130,6 +169,10 @@ class RegionOptions:
         """The fields that decide the regions (threads do not)."""
         d = dataclasses.asdict(self)
         d.pop("threads")
+        if self.seeding == "problem":  # the key of the sets built before world seedings existed
+            for name in ("seeding", "segment_rad", "max_regions_per_world", "sample_sigma_rad", "clique_samples",
+                         "min_clique", "coverage"):
+                d.pop(name)
         return d
 
 
@@ -286,7 +329,7 @@ def quiet_drake():
         logger.setLevel(level)
 
 
-def make_checker(problem, *, padding_m: float):
+def make_checker(problem, *, padding_m: float, edge_step_rad: float = 0.01):
     """Drake's SceneGraphCollisionChecker on the problem's plan-mode scene."""
     from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 
@@ -299,7 +342,7 @@ def make_checker(problem, *, padding_m: float):
     )
     with quiet_drake():  # its "Allocating contexts ..." info line, once per checker
         return SceneGraphCollisionChecker(
-            model=builder.Build(), robot_model_instances=[iiwa, wsg], edge_step_size=0.01,
+            model=builder.Build(), robot_model_instances=[iiwa, wsg], edge_step_size=edge_step_rad,
             env_collision_padding=padding_m, self_collision_padding=0.0,
         )
 
@@ -337,25 +380,36 @@ class RegionBuilder:
             s.containment_points = containment
         return opts
 
-    def grow(self, q: np.ndarray, *, also_contain: np.ndarray | None = None):
-        """One region around q (and containing `also_contain` if given), or None if q collides
-        in every checker or IRIS fails. Returns (A, b, seconds)."""
+    def grow(self, q: np.ndarray, *, also_contain: np.ndarray | None = None, containment: np.ndarray | None = None,
+             ellipsoid=None):
+        """One region around q, or None if q collides in every checker or IRIS fails.
+
+        Args:
+            q: the seed (the starting ellipsoid's centre).
+            also_contain: one more configuration the region must contain (with q).
+            containment: (7, m) configurations the region must contain (their hull must be free).
+            ellipsoid: the starting ellipsoid (centred at q); a hypersphere of `seed_radius_rad`
+                by default.
+
+        Returns (A, b, seconds). Containment that IRIS refuses is dropped and the region grown
+        without it."""
         from pydrake.geometry.optimization import Hyperellipsoid
         from pydrake.planning import IrisNp2, IrisZo
 
         global GROWN_IN_PROCESS
         o = self.options
         fn = IrisNp2 if o.iris == "np2" else IrisZo
+        if containment is None and also_contain is not None:
+            containment = np.column_stack([q, also_contain])
+        start = ellipsoid if ellipsoid is not None else Hyperellipsoid.MakeHypersphere(o.seed_radius_rad, q)
         for checker in self.checkers:
             if not checker.CheckConfigCollisionFree(q):
                 continue
-            for contain in ([None] if also_contain is None else [also_contain, None]):
-                containment = None if contain is None else np.column_stack([q, contain])
+            for contain in ([None] if containment is None else [containment, None]):
                 t0 = time.perf_counter()
                 try:
                     with quiet_drake():
-                        region = fn(checker, Hyperellipsoid.MakeHypersphere(o.seed_radius_rad, q), self.domain,
-                                    self._iris_options(containment))
+                        region = fn(checker, start, self.domain, self._iris_options(contain))
                 except RuntimeError as exc:  # IRIS refuses (e.g. a containment point in collision)
                     log.debug("IRIS failed at %s: %s", q, exc)
                     continue
@@ -537,6 +591,90 @@ def grow_for_problem(rs: RegionSet, problem, builder: RegionBuilder) -> int:
     return added
 
 
+def _add_region(rs: RegionSet, builder: RegionBuilder, world, q: np.ndarray, *, containment: np.ndarray | None = None,
+                ellipsoid=None, keep: tuple = ()) -> bool:
+    """Grow one region at q, check it with the python-fcl world (cuts keep q, the containment
+    points and `keep` where the region holds them) and append it to `rs`."""
+    o = builder.options
+    grown = builder.grow(q, containment=containment, ellipsoid=ellipsoid)
+    if grown is None:
+        return False
+    A, b, dt = grown
+    if o.check_rounds > 0:
+        t1 = time.perf_counter()
+        held = [q, *([] if containment is None else list(containment.T)), *keep]
+        inside = [p for p in held if np.all(A @ p <= b + 1e-9)]
+        A, b, _ = check_with_world(A, b, world=world, center=np.asarray(q, float), keep=inside,
+                                   samples=o.check_samples, rounds=o.check_rounds,
+                                   margin_rad=o.configuration_space_margin_rad, seed=o.random_seed + len(rs))
+        dt += time.perf_counter() - t1
+    rs.A.append(A)
+    rs.b.append(b)
+    rs.seeds.append(np.asarray(q, float))
+    rs.region_build_s.append(dt)
+    return True
+
+
+def coverage_of(rs: RegionSet, samples: np.ndarray) -> float:
+    """The fraction of `samples` (collision-free configurations) inside some region."""
+    if len(samples) == 0 or len(rs) == 0:
+        return 0.0
+    return float(rs.contains(samples).any(axis=1).mean())
+
+
+def grow_for_world(rs: RegionSet, problem, builder: RegionBuilder) -> dict:
+    """Grow `rs` from the problem's collision world alone (its task chain, `planners.gcs_cover`),
+    never from the problem's start, goal or paths; then solve GCS between the chain's ends, check
+    its path with the python-fcl world and cut what collides (`checked_path`). Returns the build's
+    figures (chain, regions, seconds)."""
+    from planners.gcs_cover import chain_seeds, clique_seeds, free_task_samples, task_chain
+    from planners.worlds import collision_world
+
+    o = builder.options
+    t0 = time.perf_counter()
+    world = collision_world(problem)
+    chain, info = task_chain(problem, seed=o.random_seed, rrt_time_s=o.guide_rrt_time_s)
+    if chain is not None:
+        ends = (chain[0], chain[-1])
+        info["chain_rad"] = float(np.sum(np.linalg.norm(np.diff(chain, axis=0), axis=1)))
+        if o.seeding == "chain":
+            for q, C in chain_seeds(chain, segment_rad=o.segment_rad, max_regions=o.max_regions_per_world):
+                _add_region(rs, builder, world, q, containment=C, keep=ends)
+        else:
+            rng = np.random.default_rng([o.random_seed, 7])
+            # The visibility graph only groups samples (regions are grown by IRIS and checked with
+            # the python-fcl world after), so its edges are checked at a coarser 0.05 rad step;
+            # unpadded, as Drake's clique cover ignores padding.
+            checker = make_checker(problem, padding_m=0.0, edge_step_rad=0.05)
+            for _ in range(o.max_regions_per_world):
+                if len(rs) >= o.max_regions_per_world:
+                    break
+                probe = free_task_samples(chain, n=200, sigma_rad=o.sample_sigma_rad, rng=rng, world=world)
+                info["coverage_estimate"] = coverage_of(rs, probe)
+                if info["coverage_estimate"] >= o.coverage:
+                    break
+                pool = free_task_samples(chain, n=4 * o.clique_samples, sigma_rad=o.sample_sigma_rad, rng=rng,
+                                         world=world)
+                pool = pool[~rs.contains(pool).any(axis=1)][: o.clique_samples] if len(rs) else pool[: o.clique_samples]
+                cliques = clique_seeds(checker, pool, min_clique=o.min_clique,
+                                       max_cliques=o.max_regions_per_world - len(rs))
+                if not cliques:
+                    break
+                for q, E in cliques:
+                    _add_region(rs, builder, world, q, ellipsoid=E, keep=ends)
+        update_edges(rs, 0)
+        info["ends_connected"] = bool(rs.connected(*ends))
+        if info["ends_connected"]:
+            path, st = checked_path(rs.A, rs.b, rs.edges, rs.seeds, ends[0], ends[1], world=world)
+            info["verified"] = path is not None
+    if WORLD_BUILT not in rs.checked:
+        rs.checked.append(WORLD_BUILT)
+    info["regions"] = len(rs)
+    rs.offline_s += time.perf_counter() - t0
+    info["offline_s"] = rs.offline_s
+    return info
+
+
 def regions_for(problem, options: RegionOptions, *, cache_dir: str | Path | None = None,
                 build: bool = True, fresh: bool = False) -> tuple[RegionSet | None, dict]:
     """The cached region set of the problem's world, grown for this problem if needed.
@@ -557,7 +695,7 @@ def regions_for(problem, options: RegionOptions, *, cache_dir: str | Path | None
     path = None if fresh else find_cached(whash, cache_dir)
     rs = RegionSet.load(path) if path is not None else None
     info = {"world_hash": whash, "regions_added": 0, "path": None if path is None else str(path)}
-    pkey = problem_hash(problem)
+    pkey = WORLD_BUILT if options.seeding != "problem" else problem_hash(problem)
     if rs is not None and pkey in rs.checked:
         info["cache"] = "hit"
         return rs, info
@@ -568,7 +706,12 @@ def regions_for(problem, options: RegionOptions, *, cache_dir: str | Path | None
     if rs is None:
         rs = RegionSet(whash, iris=options.iris)
     with quiet_drake():
-        info["regions_added"] = grow_for_problem(rs, problem, RegionBuilder(problem, options))
+        if options.seeding == "problem":
+            info["regions_added"] = grow_for_problem(rs, problem, RegionBuilder(problem, options))
+        else:
+            n0 = len(rs)
+            info["build"] = grow_for_world(rs, problem, RegionBuilder(problem, options))
+            info["regions_added"] = len(rs) - n0
     if path is None:
         path = (Path(cache_dir) if cache_dir else DEFAULT_CACHE_DIR) / f"{whash}.npz"
     rs.save(path)

@@ -119,6 +119,110 @@ def usable_regions(A: list, b: list) -> list[int]:
     return keep
 
 
+def join_endpoint(A: list, b: list, q: np.ndarray, *, world, resolution_rad: float = 0.01,
+                  inset_rad: float = 0.02, deadline: float = float("inf"),
+                  among: set[int] | None = None) -> tuple[list[int], np.ndarray | None, int]:
+    """Join a configuration to the regions {A_i q <= b_i} online (planning time).
+
+    If regions hold q, nothing is added. Otherwise, regions are tried in order of their distance
+    to q: the nearest point of the region, moved `inset_rad` towards the region's Chebyshev
+    centre (inside the region, not on its face), is joined to q by a straight segment if the
+    python-fcl world finds that segment free at `resolution_rad`; GCS then plans from (to) that
+    point and the segment is prepended (appended). (A segment as one more convex set of the graph,
+    a VPolytope of its two ends, made Drake's relaxation infeasible in our trials.)
+
+    With `among`, only those regions are considered, and by a segment even if another region
+    holds q (to reach the other end's part of a disconnected region graph).
+
+    Returns:
+        (regions holding q or entered by the segment, the segment's far end or None if q is held,
+        regions tried). ([], None, tried) when nothing joins q.
+    """
+    from pydrake.geometry.optimization import HPolyhedron
+
+    q = np.asarray(q, float)
+    holding = [i for i in range(len(A)) if np.all(A[i] @ q <= b[i] + 1e-9)]
+    if holding and among is None:
+        return holding, None, 0
+    near = []
+    for i in usable_regions(A, b):
+        if among is not None and (i not in among or i in holding):
+            continue
+        poly = HPolyhedron(np.asarray(A[i], float), np.asarray(b[i], float))
+        found = poly.Projection(q.reshape(-1, 1))
+        if found is None:
+            continue
+        dist, points = found
+        near.append((float(dist[0]), i, points[:, 0], poly))
+    near.sort(key=lambda t: t[0])
+    tried = 0
+    for _, i, p, poly in near:
+        if time.perf_counter() >= deadline:
+            break
+        tried += 1
+        c = poly.ChebyshevCenter()
+        d = c - p
+        n = float(np.linalg.norm(d))
+        p_in = p + d * min(1.0, inset_rad / n) if n > 1e-12 else p
+        if world.motion_free(q, p_in, resolution_rad=resolution_rad):
+            return [i], p_in, tried
+    return [], None, tried
+
+
+def connect_ends(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.ndarray, *, world,
+                 resolution_rad: float = 0.01, deadline: float = float("inf")) -> dict:
+    """Join start and goal to the regions (`join_endpoint`) and say whether the region graph
+    links them.
+
+    Returns:
+        {"connected": bool, "start_join"/"goal_join": "inside", "segment" or "none",
+        "start_join_tried"/"goal_join_tried": regions tried, "ends": the configurations GCS plans
+        between (an end itself, or the far end of its joining segment)}.
+    """
+    out: dict = {"ends": []}
+    held = []
+    for name, q in (("start", q_start), ("goal", q_goal)):
+        regions, p, tried = join_endpoint(A, b, q, world=world, resolution_rad=resolution_rad, deadline=deadline)
+        out[f"{name}_join"] = "inside" if regions and p is None else ("segment" if regions else "none")
+        out[f"{name}_join_tried"] = tried
+        out["ends"].append(np.asarray(q if p is None else p, float))
+        held.append(regions)
+    out["connected"] = bool(held[0] and held[1] and linked(edges, held[0], held[1]))
+    if held[0] and held[1] and not out["connected"]:
+        # The ends sit in parts of the region graph that do not meet: join one end by a free
+        # segment straight into the other end's part.
+        for k, (name, q) in enumerate((("start", q_start), ("goal", q_goal))):
+            other = reachable(edges, held[1 - k])
+            regions, p, tried = join_endpoint(A, b, q, world=world, resolution_rad=resolution_rad,
+                                              deadline=deadline, among=other)
+            out[f"{name}_join_tried"] += tried
+            if regions:
+                out[f"{name}_join"] = "segment"
+                out["ends"][k] = np.asarray(p, float)
+                out["connected"] = True
+                break
+    return out
+
+
+def reachable(edges: list, starts: list[int]) -> set[int]:
+    """The regions the directed region graph `edges` leads to from `starts` (them included)."""
+    adjacency: dict[int, list[int]] = {}
+    for i, j in edges:
+        adjacency.setdefault(i, []).append(j)
+    seen, frontier = set(starts), list(starts)
+    while frontier:
+        for j in adjacency.get(frontier.pop(), []):
+            if j not in seen:
+                seen.add(j)
+                frontier.append(j)
+    return seen
+
+
+def linked(edges: list, starts: list[int], targets: list[int]) -> bool:
+    """Whether the directed region graph `edges` leads from a region of `starts` to one of `targets`."""
+    return bool(reachable(edges, starts) & set(targets))
+
+
 def _solver(name: str):
     from pydrake.solvers import ClarabelSolver, ScsSolver
 
@@ -197,14 +301,19 @@ def checked_path(A: list, b: list, edges: list, seeds: list, q_start: np.ndarray
     and solve again, up to `max_repairs` times or the deadline (time.perf_counter()).
 
     Returns:
-        (path (N, 7) or None, stats: solver_status, cost, repairs, cuts, reason when None, and
-        timed_out when the deadline stopped the repairs).
+        (path (N, 7) or None, stats: solver_status, cost, repairs, cuts, first_solve_s and
+        gcs_solve_s (the first and all GCS solves, s), reason when None, and timed_out when the
+        deadline stopped the repairs).
     """
     lower, upper = world.robot.lower_rad, world.robot.upper_rad
     stats: dict = {"repairs": 0, "cuts": 0}
+    stats["gcs_solve_s"] = 0.0
     for attempt in range(max_repairs + 1):
+        t_solve = time.perf_counter()
         traj, result = solve_gcs(A, b, edges, q_start, q_goal, order=order, max_rounded_paths=max_rounded_paths,
                                  solver=solver, seed=seed)
+        stats["gcs_solve_s"] += time.perf_counter() - t_solve
+        stats.setdefault("first_solve_s", stats["gcs_solve_s"])
         stats["solver_status"] = result.get_solution_result().name
         if not result.is_success():
             stats["reason"] = f"GCS failed ({stats['solver_status']})"

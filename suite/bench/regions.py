@@ -1,7 +1,8 @@
 """`python -m suite bench regions`: gcs's offline cost, the wall time to grow one world's regions.
 
 Each selected world is grown from nothing in this process (no cache is read or written), exactly as
-`regions build` grows it: `grow_for_problem` with gcs's default region options. Worlds are chosen
+`regions build` grows it with gcs's default region options (`grow_for_world`; `grow_for_problem`
+under `seeding: problem`). Worlds are chosen
 among a dataset tier's problems, either the slowest ones of the shipped cache (its recorded
 `offline_s`: the worst case the per-world budget is about) or spread evenly over the tier. Each
 world is timed once (a build takes tens of seconds; its variation is in the spread of worlds).
@@ -53,7 +54,15 @@ def pick_worlds(ds, options, *, worlds: int, pick: str) -> list:
 
 
 def measure(text: str, *, worlds: int, pick: str) -> dict:
-    from planners.gcs_regions import RegionBuilder, RegionOptions, RegionSet, quiet_drake, grow_for_problem, world_hash
+    from planners.gcs_regions import (
+        RegionBuilder,
+        RegionOptions,
+        RegionSet,
+        grow_for_problem,
+        grow_for_world,
+        quiet_drake,
+        world_hash,
+    )
     from suite.problems.dataset import load_dataset
 
     ds = load_dataset(text)
@@ -62,8 +71,9 @@ def measure(text: str, *, worlds: int, pick: str) -> dict:
     for pid, problem, recorded in pick_worlds(ds, options, worlds=worlds, pick=pick):
         rs = RegionSet(world_hash(problem, options), iris=options.iris)
         t0, c0 = time.perf_counter(), _cpu_s()
+        grow = grow_for_problem if options.seeding == "problem" else grow_for_world
         with quiet_drake():  # as `regions build` grows them
-            grow_for_problem(rs, problem, RegionBuilder(problem, options))
+            grow(rs, problem, RegionBuilder(problem, options))
         wall, cpu = time.perf_counter() - t0, _cpu_s() - c0
         rows.append({"problem_id": pid, "family": ds.meta[pid]["family"], "kind": ds.meta[pid]["kind"],
                      "regions": len(rs.seeds), "wall_s": round(wall, 1), "cpu_s": round(cpu, 1),

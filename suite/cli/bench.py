@@ -14,6 +14,7 @@ TARGETS = {
     "execution": "suite.bench.execution",
     "dataset": "suite.bench.dataset",
     "regions": "suite.bench.regions",
+    "gcs-regions": "suite.bench.gcs_regions",
     "single-tree": "suite.bench.single_tree",
     "certify": "suite.bench.certify",
     "attribution": "suite.bench.attribution",

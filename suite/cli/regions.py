@@ -31,6 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b.add_argument("--out", default=None,
                    help="region cache directory (default scenes/datasets/NAME/regions/, read by gcs)")
     b.add_argument("--iris", default=None, help="IRIS algorithm: np2 or zo (default: gcs's default)")
+    b.add_argument("--seeding", default=None,
+                   help="chain, cliques (from the world alone) or problem (at each problem's ends; default: gcs's default)")
     b.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
     b.add_argument("--executor", choices=("local", "dask"), default="local", help="where jobs run (default local)")
     b.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://HOST:PORT (with --executor dask)")
@@ -38,6 +40,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b.add_argument("--rebuild", action="store_true",
                    help="grow every world from nothing, ignoring cached regions (e.g. to re-measure the offline "
                         "cost on a quiet machine, or after changing how regions grow)")
+
+
+def _connected(rs, problem) -> bool:
+    """Whether gcs would find start and goal linked by the regions (after its online joins)."""
+    from planners.gcs_solve import connect_ends
+    from planners.worlds import collision_world
+
+    return bool(connect_ends(rs.A, rs.b, rs.edges, problem.q_start, problem.q_goal,
+                             world=collision_world(problem))["connected"])
 
 
 def _build_world(payload: tuple) -> dict:
@@ -51,7 +62,7 @@ def _build_world(payload: tuple) -> dict:
     for i, problem in enumerate(problems):
         rs, info = regions_for(problem, options, cache_dir=out, build=True, fresh=rebuild and i == 0)
         infos.append(info)
-    connected = [bool(rs.connected(p.q_start, p.q_goal)) for p in problems] if rs is not None else []
+    connected = [_connected(rs, p) for p in problems] if rs is not None else []
     stored = None if rs is None else {
         "A": [a.tolist() for a in rs.A], "b": [x.tolist() for x in rs.b], "seeds": [q.tolist() for q in rs.seeds],
         "region_build_s": rs.region_build_s, "offline_s": rs.offline_s, "problems": rs.problems,
@@ -79,7 +90,8 @@ def run(args: argparse.Namespace) -> int:
     if args.scheduler and args.executor != "dask":
         raise SuiteError("--scheduler needs --executor dask")
     ds = load_dataset(args.dataset)
-    options = GcsConfig().region_options() if args.iris is None else GcsConfig(iris=args.iris).region_options()
+    chosen = {k: v for k, v in (("iris", args.iris), ("seeding", args.seeding)) if v is not None}
+    options = GcsConfig(**chosen).region_options()
     out = Path(args.out) if args.out else dataset_dir(parse_dataset_arg(args.dataset)[0]) / "regions"
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -164,7 +176,7 @@ def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, i
     built = [r for r in rows if any(c != "hit" for c in r["cache"])]
     per_region = [s for r in rows for s in r["region_build_s"]]
     summary = {
-        "dataset": args.dataset, "iris": options.iris, "options": options.key_fields(), "worlds": len(rows),
+        "dataset": args.dataset, "iris": options.iris, "seeding": options.seeding, "options": options.key_fields(), "worlds": len(rows),
         "worlds_built_now": len(built), "wall_s": wall,
         "problems": sum(r["problems"] for r in rows), "connected": sum(r["connected"] for r in rows),
         "offline_s_median": statistics.median(r["offline_s"] for r in rows) if rows else None,
