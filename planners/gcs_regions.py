@@ -35,282 +35,36 @@ that uses it.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
-import hashlib
 import itertools
-import json
 import logging
-import os
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from planners.gcs_solve import checked_path, cut_at_collision
-from scenes.errors import SuiteError
+from planners.gcs_sets import (  # noqa: F401 (the set's data, named here as before)
+    DATASETS_DIR,
+    DEFAULT_CACHE_DIR,
+    FORMAT_VERSION,
+    IRIS_ALGORITHMS,
+    SEEDINGS,
+    WORLD_BUILT,
+    RegionOptions,
+    RegionSet,
+    cache_dirs,
+    find_cached,
+    problem_hash,
+    world_hash,
+)
+from planners.gcs_solve import check_with_world, checked_path, cut_at_collision, cut_blocked_segment  # noqa: F401
 
 log = logging.getLogger(__name__)
-
-FORMAT_VERSION = 1
-IRIS_ALGORITHMS = ("np2", "zo")
-#: How seeds are chosen: from the world alone ("chain", "cliques", see `planners.gcs_cover`), or
-#: from each problem's start, goal and a guide between them ("problem", the earlier rule: it uses
-#: the problems, so its regions are not the world's alone).
-SEEDINGS = ("chain", "cliques", "problem")
-#: The mark in `RegionSet.checked` of a set built from its world alone.
-WORLD_BUILT = "world"
-#: Default cache of regions built on demand (results/ is generated output, not committed).
-DEFAULT_CACHE_DIR = Path(__file__).resolve().parents[1] / "results" / "regions"
-#: Datasets may carry their own prebuilt regions (`python -m suite regions build --dataset NAME`).
-DATASETS_DIR = Path(__file__).resolve().parents[1] / "scenes" / "datasets"
 
 #: Offline rounds of connect (guide path), solve, check and cut per problem.
 VERIFY_ROUNDS = 3
 
 #: Regions grown in this process (tests assert that a cached world grows none).
 GROWN_IN_PROCESS = 0
-
-
-@dataclasses.dataclass(frozen=True)
-class RegionOptions:
-    """How regions are grown (every field enters the cache key).
-
-    Attributes:
-        iris: "np2" (IrisNp2: closest collisions by nonlinear programming) or "zo" (IrisZo:
-            zero-order, collision checks only).
-        num_particles: samples per inner iteration of the statistical test.
-        epsilon: admissible fraction of a region's volume in collision.
-        delta: probability that the fraction in collision exceeds epsilon.
-        max_iterations: ellipsoid / separating-plane alternations.
-        max_iterations_separating_planes: rounds of adding faces per alternation.
-        max_separating_planes_per_iteration: faces added per round.
-        configuration_space_margin_rad: faces step back from collisions by this much (rad).
-        padding_m: the Drake checker's robot-environment padding (m); a seed that collides with
-            the padding (a grasp between cans) is grown again without it.
-        seed_radius_rad: radius of the starting hypersphere around a seed (rad).
-        guide_step_rad: spacing of the configurations tested along a guide path (joint L2, rad).
-        guide_rrt_time_s: budget of an RRT-Connect guide path (s): per problem ("problem"
-            seeding), or per blocked join of the world's task chain (world seedings).
-        max_regions_per_problem: regions a problem may add (start, goal and connection;
-            "problem" seeding only).
-        check_samples, check_rounds: each region is sampled uniformly (`check_samples` per
-            round) and checked with the python-fcl world, the validator's engine; faces are added
-            to cut off what collides, for up to `check_rounds` rounds (0 to skip).
-        random_seed: IRIS's random seed.
-        threads: threads of one IRIS call (its collision checks).
-        seeding: "chain" (default: regions along the world's task chain, each containing one
-            segment of it), "cliques" (a visibility clique cover of samples of the task's
-            neighbourhood), both from the world alone (`planners.gcs_cover`); or "problem" (seeds
-            at each problem's start, goal and along a guide between them, offline: the earlier
-            rule, which uses the problems).
-        segment_rad: longest chain segment one region must contain ("chain").
-        max_regions_per_world: cap on a world's regions (world seedings). GCS's cost grows with
-            the edges between overlapping regions: on a `window` world, 12 chain regions (37
-            edges) took 2.3 s a solve, 8 (14 edges) 0.2 s, for a path 6% longer.
-        sample_sigma_rad: per-joint standard deviation of the task-neighbourhood samples around
-            the task chain ("cliques"; also the coverage estimate of `suite bench gcs-regions`).
-        clique_samples: collision-free samples per clique-cover round ("cliques").
-        min_clique: smallest clique that makes a region ("cliques"; at least 8 in 7-D).
-        coverage: stop the clique cover once this fraction of fresh task-neighbourhood samples
-            lies in some region ("cliques").
-    """
-
-    iris: str = "np2"
-    num_particles: int = 200
-    epsilon: float = 0.05
-    delta: float = 0.1
-    max_iterations: int = 1
-    max_iterations_separating_planes: int = 10
-    max_separating_planes_per_iteration: int = 10
-    configuration_space_margin_rad: float = 0.01
-    padding_m: float = 0.015
-    seed_radius_rad: float = 0.01
-    guide_step_rad: float = 0.02
-    guide_rrt_time_s: float = 2.0
-    max_regions_per_problem: int = 12
-    check_samples: int = 200
-    check_rounds: int = 2
-    random_seed: int = 1234
-    threads: int = 1
-    seeding: str = "chain"
-    segment_rad: float = 0.5
-    max_regions_per_world: int = 8
-    sample_sigma_rad: float = 0.25
-    clique_samples: int = 200
-    min_clique: int = 10
-    coverage: float = 0.7
-
-    def __post_init__(self):
-        if self.iris not in IRIS_ALGORITHMS:
-            raise SuiteError(f"gcs iris={self.iris!r}; allowed: {', '.join(IRIS_ALGORITHMS)}")
-        if self.seeding not in SEEDINGS:
-            raise SuiteError(f"gcs seeding={self.seeding!r}; allowed: {', '.join(SEEDINGS)}")
-        if not 0 < self.coverage <= 1:
-            raise SuiteError(f"gcs coverage={self.coverage!r} must be in (0, 1]")
-        if self.min_clique < 8:
-            raise SuiteError(f"gcs min_clique={self.min_clique!r} must be >= 8 (a 7-D ellipsoid needs 8 points)")
-        for name in ("num_particles", "max_iterations", "max_iterations_separating_planes",
-                     "max_separating_planes_per_iteration", "max_regions_per_problem", "threads",
-                     "check_samples", "max_regions_per_world", "clique_samples"):
-            if getattr(self, name) < 1:
-                raise SuiteError(f"gcs {name}={getattr(self, name)!r} must be >= 1")
-        for name in ("epsilon", "delta"):
-            if not 0 < getattr(self, name) < 1:
-                raise SuiteError(f"gcs {name}={getattr(self, name)!r} must be in (0, 1)")
-        for name in ("seed_radius_rad", "guide_step_rad", "guide_rrt_time_s", "segment_rad", "sample_sigma_rad"):
-            if not getattr(self, name) > 0:
-                raise SuiteError(f"gcs {name}={getattr(self, name)!r} must be positive")
-        for name in ("configuration_space_margin_rad", "padding_m", "check_rounds"):
-            if not getattr(self, name) >= 0:
-                raise SuiteError(f"gcs {name}={getattr(self, name)!r} must be >= 0")
-
-    def key_fields(self) -> dict:
-        """The fields that decide the regions (threads do not)."""
-        d = dataclasses.asdict(self)
-        d.pop("threads")
-        if self.seeding == "problem":  # the key of the sets built before world seedings existed
-            for name in ("seeding", "segment_rad", "max_regions_per_world", "sample_sigma_rad", "clique_samples",
-                         "min_clique", "coverage"):
-                d.pop(name)
-        return d
-
-
-def world_hash(problem, options: RegionOptions) -> str:
-    """Content hash of a problem's collision world and the region options (20 hex digits)."""
-    scene_key, held, opening, removed = problem.world_key()
-    blob = json.dumps({
-        "format": FORMAT_VERSION,
-        "scene": scene_key,
-        "held": None if held is None else [held[0], hashlib.sha1(held[1]).hexdigest()],
-        "opening_m": opening,
-        "removed": list(removed),
-        "options": options.key_fields(),
-    }, sort_keys=True)
-    return hashlib.sha256(blob.encode()).hexdigest()[:20]
-
-
-@dataclasses.dataclass
-class RegionSet:
-    """The regions of one collision world.
-
-    Attributes:
-        world_hash: see `world_hash`.
-        A, b: per region, the H-representation {q : A q <= b}.
-        seeds: (k, 7) the configuration each region was grown from.
-        region_build_s: per region, wall time of its IRIS call (s).
-        offline_s: total wall time spent building this set (IRIS, guide paths, checks), s.
-        problems: problem hashes (start, goal) this set was grown for.
-        edges: directed pairs (i, j) of intersecting regions (both directions listed).
-        iris: the algorithm.
-        checked: problem hashes for which the set was verified offline: the blocked start-goal
-            segment cut out (`cut_blocked_segment`), start and goal connected, and GCS's path
-            checked with the python-fcl world and repaired by cuts (`planners.gcs_solve.checked_path`).
-    """
-
-    world_hash: str
-    A: list[np.ndarray] = dataclasses.field(default_factory=list)
-    b: list[np.ndarray] = dataclasses.field(default_factory=list)
-    seeds: list[np.ndarray] = dataclasses.field(default_factory=list)
-    region_build_s: list[float] = dataclasses.field(default_factory=list)
-    offline_s: float = 0.0
-    problems: list[str] = dataclasses.field(default_factory=list)
-    edges: list[tuple[int, int]] = dataclasses.field(default_factory=list)
-    iris: str = "np2"
-    checked: list[str] = dataclasses.field(default_factory=list)
-
-    def __len__(self) -> int:
-        return len(self.A)
-
-    def contains(self, Q: np.ndarray, tol: float = 1e-9) -> np.ndarray:
-        """(m, n_regions) bool: which regions contain each row of Q (m, 7)."""
-        Q = np.atleast_2d(Q)
-        if not self.A:
-            return np.zeros((len(Q), 0), bool)
-        return np.stack([np.all(Q @ A.T <= b + tol, axis=1) for A, b in zip(self.A, self.b)], axis=1)
-
-    def polyhedra(self) -> list:
-        from pydrake.geometry.optimization import HPolyhedron
-
-        return [HPolyhedron(A, b) for A, b in zip(self.A, self.b)]
-
-    def connected(self, q_start: np.ndarray, q_goal: np.ndarray) -> bool:
-        """Whether the region graph links a region holding q_start to one holding q_goal."""
-        inside = self.contains(np.stack([q_start, q_goal]))
-        frontier = list(np.nonzero(inside[0])[0])
-        seen = set(frontier)
-        targets = set(np.nonzero(inside[1])[0])
-        adjacency: dict[int, list[int]] = {}
-        for i, j in self.edges:
-            adjacency.setdefault(i, []).append(j)
-        while frontier:
-            i = frontier.pop()
-            if i in targets:
-                return True
-            for j in adjacency.get(i, []):
-                if j not in seen:
-                    seen.add(j)
-                    frontier.append(j)
-        return False
-
-    # --- storage -------------------------------------------------------------------------------
-
-    def save(self, path: Path) -> None:
-        """Write atomically (workers of one run may build the same world side by side)."""
-        path.parent.mkdir(parents=True, exist_ok=True)
-        sizes = np.array([len(b) for b in self.b], int)
-        meta = {"format": FORMAT_VERSION, "world_hash": self.world_hash, "offline_s": self.offline_s,
-                "problems": self.problems, "iris": self.iris, "region_build_s": self.region_build_s,
-                "verified": self.checked}
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-        os.close(fd)
-        with open(tmp, "wb") as f:
-            np.savez_compressed(
-                f, sizes=sizes,
-                A=np.concatenate(self.A) if self.A else np.zeros((0, 7)),
-                b=np.concatenate(self.b) if self.b else np.zeros(0),
-                seeds=np.array(self.seeds).reshape(-1, 7),
-                edges=np.array(self.edges, int).reshape(-1, 2),
-                meta=np.array(json.dumps(meta)),
-            )
-        os.replace(tmp, path)
-
-    @classmethod
-    def load(cls, path: Path) -> RegionSet:
-        with np.load(path) as z:
-            meta = json.loads(str(z["meta"]))
-            if meta.get("format") != FORMAT_VERSION:
-                raise SuiteError(f"{path}: region cache format {meta.get('format')!r}, expected {FORMAT_VERSION}")
-            cuts = np.cumsum(z["sizes"])[:-1]
-            A = np.split(z["A"], cuts) if len(z["sizes"]) else []
-            b = np.split(z["b"], cuts) if len(z["sizes"]) else []
-            return cls(meta["world_hash"], list(A), list(b), list(z["seeds"]), list(meta["region_build_s"]),
-                       float(meta["offline_s"]), list(meta["problems"]),
-                       [tuple(map(int, e)) for e in z["edges"]], meta["iris"], list(meta.get("verified", [])))
-
-
-def problem_hash(problem) -> str:
-    """Identifies a problem's ends within its world."""
-    blob = np.concatenate([np.asarray(problem.q_start, float), np.asarray(problem.q_goal, float)]).round(9)
-    return hashlib.sha1(blob.tobytes()).hexdigest()[:16]
-
-
-def cache_dirs(cache_dir: str | Path | None) -> list[Path]:
-    """Where region sets are looked up: the given (or default) cache, then every dataset's
-    `regions/` directory."""
-    first = Path(cache_dir) if cache_dir else DEFAULT_CACHE_DIR
-    dirs = [first]
-    if DATASETS_DIR.exists():
-        dirs += sorted(p / "regions" for p in DATASETS_DIR.iterdir() if (p / "regions").is_dir())
-    return dirs
-
-
-def find_cached(whash: str, cache_dir: str | Path | None) -> Path | None:
-    for d in cache_dirs(cache_dir):
-        path = d / f"{whash}.npz"
-        if path.exists():
-            return path
-    return None
 
 
 # --- building ----------------------------------------------------------------------------------
@@ -417,60 +171,6 @@ class RegionBuilder:
                 region = region.ReduceInequalities()
                 return region.A(), region.b(), time.perf_counter() - t0
         return None
-
-
-def cut_blocked_segment(rs: RegionSet, q0: np.ndarray, q1: np.ndarray, *, world, margin_rad: float) -> int:
-    """If the straight segment q0 -> q1 collides (python-fcl), cut it out of every region holding
-    both ends (such a region holds the whole segment: the shortest path would take it). Each cut
-    keeps the region's seed. Returns the number of regions cut."""
-    if world.motion_free(q0, q1, resolution_rad=0.01):
-        return 0
-    dense = world.interpolate(np.stack([q0, q1]), 0.01)
-    x_bad = dense[world.first_collision(dense)]
-    cut = 0
-    for i in np.flatnonzero(rs.contains(np.stack([q0, q1])).all(axis=0)):
-        seed = np.asarray(rs.seeds[i], float)
-        A, b = cut_at_collision(rs.A[i], rs.b[i], world=world, center=seed, q_bad=x_bad, keep=[seed],
-                                margin_rad=margin_rad)
-        if len(b) > len(rs.b[i]):
-            rs.A[i], rs.b[i] = A, b
-            cut += 1
-    return cut
-
-
-def check_with_world(A: np.ndarray, b: np.ndarray, *, world, center: np.ndarray, keep: list[np.ndarray],
-                     samples: int, rounds: int, margin_rad: float, seed: int):
-    """Cut a region where the python-fcl world (the validator's engine) finds collisions among
-    uniform samples (hit-and-run), for up to `rounds` rounds. Returns (A, b, cuts)."""
-    from pydrake.common import RandomGenerator
-    from pydrake.geometry.optimization import HPolyhedron
-
-    gen = RandomGenerator(seed)
-    cuts = 0
-    for _ in range(rounds):
-        poly = HPolyhedron(A, b)
-        x = poly.ChebyshevCenter()  # strictly inside (the seed may lie on a face)
-        Q = []
-        try:
-            for _ in range(samples):
-                x = poly.UniformSample(gen, x, 5)
-                Q.append(x)
-        except ValueError:  # a sliver the sampler cannot move in: check what was drawn
-            pass
-        if not Q:
-            break
-        Q = np.array(Q)
-        bad = Q[~world.states_free(Q)]
-        if len(bad) == 0:
-            break
-        # Cut towards the colliding sample nearest the center first: it shapes the region most.
-        for q_bad in bad[np.argsort(np.linalg.norm(bad - center, axis=1))][:10]:
-            if np.all(A @ q_bad <= b):
-                A2, b2 = cut_at_collision(A, b, world=world, center=center, q_bad=q_bad, keep=keep,
-                                          margin_rad=margin_rad)
-                cuts += len(b2) - len(b)
-                A, b = A2, b2
-    return A, b, cuts
 
 
 def _guide_path(problem, options: RegionOptions) -> np.ndarray | None:

@@ -14,6 +14,8 @@ import time
 
 import numpy as np
 
+from planners.gcs_sets import RegionSet
+
 SOLVERS = ("clarabel", "scs")
 
 
@@ -347,3 +349,57 @@ def checked_path(A: list, b: list, edges: list, seeds: list, q_start: np.ndarray
             stats["reason"] = "the path through the regions collides and cannot be cut"
             return None, stats
     return None, stats
+
+
+def cut_blocked_segment(rs: RegionSet, q0: np.ndarray, q1: np.ndarray, *, world, margin_rad: float) -> int:
+    """If the straight segment q0 -> q1 collides (python-fcl), cut it out of every region holding
+    both ends (such a region holds the whole segment: the shortest path would take it). Each cut
+    keeps the region's seed. Returns the number of regions cut."""
+    if world.motion_free(q0, q1, resolution_rad=0.01):
+        return 0
+    dense = world.interpolate(np.stack([q0, q1]), 0.01)
+    x_bad = dense[world.first_collision(dense)]
+    cut = 0
+    for i in np.flatnonzero(rs.contains(np.stack([q0, q1])).all(axis=0)):
+        seed = np.asarray(rs.seeds[i], float)
+        A, b = cut_at_collision(rs.A[i], rs.b[i], world=world, center=seed, q_bad=x_bad, keep=[seed],
+                                margin_rad=margin_rad)
+        if len(b) > len(rs.b[i]):
+            rs.A[i], rs.b[i] = A, b
+            cut += 1
+    return cut
+
+
+def check_with_world(A: np.ndarray, b: np.ndarray, *, world, center: np.ndarray, keep: list[np.ndarray],
+                     samples: int, rounds: int, margin_rad: float, seed: int):
+    """Cut a region where the python-fcl world (the validator's engine) finds collisions among
+    uniform samples (hit-and-run), for up to `rounds` rounds. Returns (A, b, cuts)."""
+    from pydrake.common import RandomGenerator
+    from pydrake.geometry.optimization import HPolyhedron
+
+    gen = RandomGenerator(seed)
+    cuts = 0
+    for _ in range(rounds):
+        poly = HPolyhedron(A, b)
+        x = poly.ChebyshevCenter()  # strictly inside (the seed may lie on a face)
+        Q = []
+        try:
+            for _ in range(samples):
+                x = poly.UniformSample(gen, x, 5)
+                Q.append(x)
+        except ValueError:  # a sliver the sampler cannot move in: check what was drawn
+            pass
+        if not Q:
+            break
+        Q = np.array(Q)
+        bad = Q[~world.states_free(Q)]
+        if len(bad) == 0:
+            break
+        # Cut towards the colliding sample nearest the center first: it shapes the region most.
+        for q_bad in bad[np.argsort(np.linalg.norm(bad - center, axis=1))][:10]:
+            if np.all(A @ q_bad <= b):
+                A2, b2 = cut_at_collision(A, b, world=world, center=center, q_bad=q_bad, keep=keep,
+                                          margin_rad=margin_rad)
+                cuts += len(b2) - len(b)
+                A, b = A2, b2
+    return A, b, cuts
