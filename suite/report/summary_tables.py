@@ -91,23 +91,25 @@ def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] 
     if not records:
         return "no trial records"
     groups = summarize(records, planners=planners)
-    headers = ["planner", "success (95% CI)", "time to\nsolve (s)", *TERMINAL_METRICS.values()]
-    rows = []
     if wide:
         headers, rows = group_rows(groups, key=None)
-        groups = []
-    for g in groups:
-        cells = [g.planner, _rate(g), "n/a" if g.time_to_solve.n == 0 else format_number(g.time_to_solve.median)]
-        for m in TERMINAL_METRICS:
-            st = g.metrics[m]
-            scale = 1000.0 if m == "clearance_min_m" else 1.0
-            cells.append("n/a" if st.n == 0 else format_number(scale * st.median))
-        rows.append(cells)
+    else:
+        headers = ["planner", "success (95% CI)", "time to\nsolve (s)", *TERMINAL_METRICS.values()]
+        rows = [_terminal_row(g) for g in groups]
     lines = [composition(records), certification_line(records, [g.planner for g in groups]),
              "Medians [quartiles]; per family and kind: summary.md (and report.html)." if wide else
              "Medians; every metric with its quartiles (--wide), per family and kind: summary.md (and report.html)."]
     return tabulate(rows, headers=headers, tablefmt="simple") + "\n" + "\n".join(
         textwrap.fill(ln, width=80, break_on_hyphens=False) for ln in "\n".join(lines).split("\n"))
+
+
+def _terminal_row(g: GroupSummary) -> list[str]:
+    cells = [g.planner, _rate(g), "n/a" if g.time_to_solve.n == 0 else format_number(g.time_to_solve.median)]
+    for m in TERMINAL_METRICS:
+        st = g.metrics[m]
+        scale = 1000.0 if m == "clearance_min_m" else 1.0
+        cells.append("n/a" if st.n == 0 else format_number(scale * st.median))
+    return cells
 
 
 def certification_line(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:

@@ -148,6 +148,9 @@ def test_wide_summary_table_has_every_metric_with_quartiles():
         assert label.split("\n")[0] in header, label
     assert "[" in next(ln for ln in wide.splitlines() if ln.startswith("rrt")).split("80%")[1]  # quartiles
     assert max(len(ln) for ln in wide.splitlines()) > max(len(ln) for ln in narrow.splitlines())
+    # the lines under the table are the narrow table's, every planner's verdicts included
+    verdicts = next(ln for ln in narrow.split("\n\n")[0].splitlines() if ln.startswith("Exact verdict"))
+    assert verdicts in wide and "rrt" in verdicts
 
 
 # --- paired statistics -----------------------------------------------------------------------------
