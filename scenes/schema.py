@@ -113,7 +113,7 @@ def load(tp: Any, data: Any, *, where: str = "", at: str = "", ignore_unknown: b
         SuiteError: one line naming the first bad field, its value and what is allowed.
     """
     if ignore_unknown and dataclasses.is_dataclass(tp) and isinstance(data, dict):
-        names = {f.name for f in dataclasses.fields(tp)}
+        names = set(fields_of(tp))
         data = {k: v for k, v in data.items() if k in names}
     try:
         return _adapter(tp).validate_python(data)
@@ -127,8 +127,7 @@ def refusal(tp: Any, value: Any) -> str | None:
     try:
         _adapter(tp).validate_python(value)
     except pydantic.ValidationError as exc:
-        msg = exc.errors(include_url=False)[0]["msg"].removeprefix("Value error, ")
-        return msg[0].lower() + msg[1:]
+        return _words(exc.errors(include_url=False)[0]["msg"])
     return None
 
 
@@ -165,11 +164,17 @@ def error_line(exc: pydantic.ValidationError, data: Any, tp: Any, *, where: str,
     if err["type"] == "missing":
         msg = f"item {'.'.join(items)} is missing: the list is too short"
     else:
-        msg = re.sub(r" or instance of \w+", "", err["msg"]).removeprefix("Value error, ")
-        msg = msg.replace("a valid tuple", "a list").replace("Tuple should", "the list should")
-        msg = msg[0].lower() + msg[1:]
-    at = f" (item {'.'.join(items)})" if items and err["type"] != "missing" else ""
-    return f"{where}field '{field}' = {shown}{at}: {msg}"
+        msg = _words(err["msg"])
+    item = f" (item {'.'.join(items)})" if items and err["type"] != "missing" else ""
+    return f"{where}field '{field}' = {shown}{item}: {msg}"
+
+
+def _words(msg: str) -> str:
+    """pydantic's message in the suite's words: a list is a list, a check's own text as written,
+    lower case first."""
+    msg = re.sub(r" or instance of \w+", "", msg).removeprefix("Value error, ")
+    msg = msg.replace("a valid tuple", "a list").replace("Tuple should", "the list should")
+    return msg[0].lower() + msg[1:]
 
 
 def _lookup(data: Any, loc: list) -> Any:

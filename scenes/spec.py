@@ -318,8 +318,7 @@ def parse_spec(raw: Any, *, variant: str, source: str | None = None) -> SceneSpe
     merged = _merge({k: v for k, v in raw.items() if k not in ("variants", "families")}, override)
     if isinstance(merged.get("table"), dict):  # the table as the file gives it, then as the box it is
         merged["table"] = dataclasses.asdict(load(Table, merged["table"], where=where, at="table").box())
-    spec = load(SceneSpec, {**merged, "variant": variant}, where=where)
-    return dataclasses.replace(spec, family=family) if family is not None else spec
+    return load(SceneSpec, {**merged, "variant": variant, "family": family}, where=where)
 
 
 def load_spec(path: str | Path | None = None, *, variant: str = "open") -> SceneSpec:
