@@ -134,13 +134,11 @@ class RegionBuilder:
             s.containment_points = containment
         return opts
 
-    def grow(self, q: np.ndarray, *, also_contain: np.ndarray | None = None, containment: np.ndarray | None = None,
-             ellipsoid=None):
+    def grow(self, q: np.ndarray, *, containment: np.ndarray | None = None, ellipsoid=None):
         """One region around q, or None if q collides in every checker or IRIS fails.
 
         Args:
             q: the seed (the starting ellipsoid's centre).
-            also_contain: one more configuration the region must contain (with q).
             containment: (7, m) configurations the region must contain (their hull must be free).
             ellipsoid: the starting ellipsoid (centred at q); a hypersphere of `seed_radius_rad`
                 by default.
@@ -153,8 +151,6 @@ class RegionBuilder:
         global GROWN_IN_PROCESS
         o = self.options
         fn = IrisNp2 if o.iris == "np2" else IrisZo
-        if containment is None and also_contain is not None:
-            containment = np.column_stack([q, also_contain])
         start = ellipsoid if ellipsoid is not None else Hyperellipsoid.MakeHypersphere(o.seed_radius_rad, q)
         for checker in self.checkers:
             if not checker.CheckConfigCollisionFree(q):
@@ -227,21 +223,9 @@ def grow_for_problem(rs: RegionSet, problem, builder: RegionBuilder) -> int:
 
     def add(q, contain=None) -> bool:
         nonlocal added
-        grown = builder.grow(q, also_contain=contain)
-        if grown is None:
+        containment = None if contain is None else np.column_stack([q, contain])
+        if not _add_region(rs, builder, world, q, containment=containment, keep=(q0, q1)):
             return False
-        A, b, dt = grown
-        if o.check_rounds > 0:
-            t1 = time.perf_counter()
-            keep = [p for p in (q, contain, q0, q1) if p is not None and np.all(A @ p <= b + 1e-9)]
-            A, b, _ = check_with_world(A, b, world=world, center=np.asarray(q, float), keep=keep,
-                                       samples=o.check_samples, rounds=o.check_rounds,
-                                       margin_rad=o.configuration_space_margin_rad, seed=o.random_seed + len(rs))
-            dt += time.perf_counter() - t1
-        rs.A.append(A)
-        rs.b.append(b)
-        rs.seeds.append(np.asarray(q, float))
-        rs.region_build_s.append(dt)
         added += 1
         return True
 
@@ -302,7 +286,8 @@ def _add_region(rs: RegionSet, builder: RegionBuilder, world, q: np.ndarray, *, 
     A, b, dt = grown
     if o.check_rounds > 0:
         t1 = time.perf_counter()
-        held = [q, *([] if containment is None else list(containment.T)), *keep]
+        # q, then the containment points other than q itself, then `keep`
+        held = [q, *([] if containment is None else [c for c in containment.T if not np.array_equal(c, q)]), *keep]
         inside = [p for p in held if np.all(A @ p <= b + 1e-9)]
         A, b, _ = check_with_world(A, b, world=world, center=np.asarray(q, float), keep=inside,
                                    samples=o.check_samples, rounds=o.check_rounds,

@@ -195,21 +195,7 @@ class RegionSet:
     def connected(self, q_start: np.ndarray, q_goal: np.ndarray) -> bool:
         """Whether the region graph links a region holding q_start to one holding q_goal."""
         inside = self.contains(np.stack([q_start, q_goal]))
-        frontier = list(np.nonzero(inside[0])[0])
-        seen = set(frontier)
-        targets = set(np.nonzero(inside[1])[0])
-        adjacency: dict[int, list[int]] = {}
-        for i, j in self.edges:
-            adjacency.setdefault(i, []).append(j)
-        while frontier:
-            i = frontier.pop()
-            if i in targets:
-                return True
-            for j in adjacency.get(i, []):
-                if j not in seen:
-                    seen.add(j)
-                    frontier.append(j)
-        return False
+        return linked(self.edges, np.nonzero(inside[0])[0].tolist(), np.nonzero(inside[1])[0].tolist())
 
     # --- storage -------------------------------------------------------------------------------
 
@@ -269,3 +255,22 @@ def find_cached(whash: str, cache_dir: str | Path | None) -> Path | None:
         if path.exists():
             return path
     return None
+
+
+def reachable(edges: list, starts: list[int]) -> set[int]:
+    """The regions the directed region graph `edges` leads to from `starts` (them included)."""
+    adjacency: dict[int, list[int]] = {}
+    for i, j in edges:
+        adjacency.setdefault(i, []).append(j)
+    seen, frontier = set(starts), list(starts)
+    while frontier:
+        for j in adjacency.get(frontier.pop(), []):
+            if j not in seen:
+                seen.add(j)
+                frontier.append(j)
+    return seen
+
+
+def linked(edges: list, starts: list[int], targets: list[int]) -> bool:
+    """Whether the directed region graph `edges` leads from a region of `starts` to one of `targets`."""
+    return bool(reachable(edges, starts) & set(targets))

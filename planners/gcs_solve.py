@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from planners.gcs_sets import RegionSet
+from planners.gcs_sets import RegionSet, linked, reachable
 
 SOLVERS = ("clarabel", "scs")
 
@@ -204,25 +204,6 @@ def connect_ends(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.
                 out["connected"] = True
                 break
     return out
-
-
-def reachable(edges: list, starts: list[int]) -> set[int]:
-    """The regions the directed region graph `edges` leads to from `starts` (them included)."""
-    adjacency: dict[int, list[int]] = {}
-    for i, j in edges:
-        adjacency.setdefault(i, []).append(j)
-    seen, frontier = set(starts), list(starts)
-    while frontier:
-        for j in adjacency.get(frontier.pop(), []):
-            if j not in seen:
-                seen.add(j)
-                frontier.append(j)
-    return seen
-
-
-def linked(edges: list, starts: list[int], targets: list[int]) -> bool:
-    """Whether the directed region graph `edges` leads from a region of `starts` to one of `targets`."""
-    return bool(reachable(edges, starts) & set(targets))
 
 
 def _solver(name: str):
