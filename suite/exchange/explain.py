@@ -96,7 +96,7 @@ def explain_rejections(results, dataset: str, records) -> list[str]:
 
     ds = load_dataset(dataset)
     problems = dict(zip(ds.ids, ds.problems))
-    paths = {ln.problem_id: ln.path for ln in read_results(results, known=set(ds.ids), dataset=dataset)}
+    paths = {ln.problem_id: ln.path_array for ln in read_results(results, known=set(ds.ids), dataset=dataset)}
     out, depths = [], []
     for rec in records:
         reason = (rec.get("stats") or {}).get("invalid_reason") or ""

@@ -147,7 +147,8 @@ def build_problems(
     """
     spec = scene.spec
     wp = spec.waypoints
-    X_plate = waypoint_pose(wp.above_plate_m)
+    task = tuple(waypoint_pose(p) for p in (wp.above_plate_m, wp.middle_m, wp.above_bin_m))
+    X_plate = task[0]
     clear = {"min_distance_m": goal_clearance_m}
     poser = _Poser(_IkCache(scene), np.random.default_rng([seed, 7919]),
                    *(dataclasses.replace(o, **clear) for o in (IkOptions(), NEAR_ONLY, WARM_BIN)))
@@ -161,7 +162,7 @@ def build_problems(
     removed: tuple[int, ...] = ()
     problems: list[PlanningProblem] = []
     for grasp in grasps:
-        chain, q_bin, removed_after = _cycle(poser, scene, grasp, q=q, q_plate=q_plate, removed=removed,
+        chain, q_bin, removed_after = _cycle(poser, scene, grasp, task, q=q, q_plate=q_plate, removed=removed,
                                              q_bin_before=q_bin_before if bin_warm_start else None,
                                              time_limit_s=time_limit_s, seed=seed)
         problems += chain
@@ -173,14 +174,14 @@ def build_problems(
     return problems
 
 
-def _cycle(poser: _Poser, scene: Scene, grasp: Grasp, *, q: np.ndarray, q_plate: np.ndarray,
-           removed: tuple[int, ...], q_bin_before: np.ndarray | None, time_limit_s: float,
+def _cycle(poser: _Poser, scene: Scene, grasp: Grasp, task: tuple[np.ndarray, ...], *, q: np.ndarray,
+           q_plate: np.ndarray, removed: tuple[int, ...], q_bin_before: np.ndarray | None, time_limit_s: float,
            seed: int) -> tuple[list[PlanningProblem], np.ndarray | None, tuple[int, ...]]:
     """One can's five problems from `q` (above the plate), its bin goal, and the cans gone after it.
-    `q_bin_before` (the previous cycle's bin goal, or None) warm-starts the bin goal."""
+    `task` holds the gripper poses above the plate, in the middle and above the bin; `q_bin_before`
+    (the previous cycle's bin goal, or None) warm-starts the bin goal."""
     spec = scene.spec
-    wp = spec.waypoints
-    X_plate, X_middle, X_bin = (waypoint_pose(p) for p in (wp.above_plate_m, wp.middle_m, wp.above_bin_m))
+    X_plate, X_middle, X_bin = task
     opening = spec.grasp.open_width_m
     truth = match_truth(scene.without_cans(removed), grasp)
     can_id = truth.id if truth is not None else -1 - grasp.can_id
