@@ -121,7 +121,10 @@ def run(args: argparse.Namespace) -> int:
         try:
             code = _build_all(executor, jobs, items, out, rows, args, options)
         except Interrupted as exc:
-            print(f"interrupted by {exc.name}: the {len(rows)} world(s) finished are kept in {out}; run the same "
+            # Count the files, not the results received: a worker writes its world's file before
+            # this process collects its result (and the workers are stopped by now).
+            kept = sum((out / f"{job.key}.npz").is_file() for job in jobs)
+            print(f"interrupted by {exc.name}: the {kept} world(s) finished are kept in {out}; run the same "
                   f"command again to build the rest", file=sys.stderr)
             return exc.exit_code
         finally:
