@@ -8,6 +8,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
+from scenes.identity_rule import CURRENT_RULE, hashed, hashed_scalar
 from scenes.scene import HeldCan, Scene
 
 
@@ -110,12 +111,13 @@ class PlanningProblem:
     def name(self) -> str:
         return f"can{self.can_id}/{self.kind}"
 
-    def world_key(self) -> tuple:
-        """Identifies the collision world of this problem (for per-process caches)."""
+    def world_key(self, *, rule: str = CURRENT_RULE) -> tuple:
+        """Identifies the collision world of this problem (per-process caches, region cache keys),
+        its floats written by identity rule `rule` (`scenes.identity_rule`)."""
         return (
             self.scene.key(),
-            None if self.held is None else (self.held.can.id, self.held.X_GC.round(9).tobytes()),
-            round(self.gripper_opening_m, 9),
+            None if self.held is None else (self.held.can.id, hashed(self.held.X_GC, rule=rule).tobytes()),
+            hashed_scalar(self.gripper_opening_m, rule=rule),
             tuple(sorted(self.removed_can_ids)),
         )
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.errors import SuiteError
+from scenes.identity_rule import CURRENT_RULE, hashed
 
 FORMAT_VERSION = 1
 IRIS_ALGORITHMS = ("np2", "zo")
@@ -134,9 +135,10 @@ class RegionOptions:
         return d
 
 
-def world_hash(problem, options: RegionOptions) -> str:
-    """Content hash of a problem's collision world and the region options (20 hex digits)."""
-    scene_key, held, opening, removed = problem.world_key()
+def world_hash(problem, options: RegionOptions, *, rule: str = CURRENT_RULE) -> str:
+    """Content hash of a problem's collision world and the region options (20 hex digits), its
+    floats written by identity rule `rule` (`scenes.identity_rule`; the cache uses the current one)."""
+    scene_key, held, opening, removed = problem.world_key(rule=rule)
     blob = json.dumps({
         "format": FORMAT_VERSION,
         "scene": scene_key,
@@ -233,9 +235,9 @@ class RegionSet:
                        [tuple(map(int, e)) for e in z["edges"]], meta["iris"], list(meta.get("verified", [])))
 
 
-def problem_hash(problem) -> str:
-    """Identifies a problem's ends within its world."""
-    blob = np.concatenate([np.asarray(problem.q_start, float), np.asarray(problem.q_goal, float)]).round(9)
+def problem_hash(problem, *, rule: str = CURRENT_RULE) -> str:
+    """Identifies a problem's ends within its world (floats by identity rule `rule`)."""
+    blob = hashed(np.concatenate([np.asarray(problem.q_start, float), np.asarray(problem.q_goal, float)]), rule=rule)
     return hashlib.sha1(blob.tobytes()).hexdigest()[:16]
 
 

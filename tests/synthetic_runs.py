@@ -19,6 +19,7 @@ from scipy.optimize import least_squares
 
 from scenes.generate import generate_scene
 from scenes.grasp_rule import down_pose, grasp_yaw, truth_grasp
+from scenes.identity_rule import CURRENT_RULE
 from scenes.robot_model import load_robot
 from scenes.spec import load_spec
 
@@ -158,7 +159,8 @@ def write_run(run_dir: Path, records: list[dict], *, planners=("ik", "rrt", "tra
     """A run directory like the runner's: manifest.json and trials.jsonl."""
     run_dir.mkdir(parents=True, exist_ok=True)
     manifest = {"command": "python -m suite compare (synthetic)",
-                "config": {"planners": list(planners), "cans": cans, "spec": None, "time_limit_s": 10.0}}
+                "config": {"planners": list(planners), "cans": cans, "spec": None, "time_limit_s": 10.0},
+                "identity_rule": CURRENT_RULE}
     (run_dir / "manifest.json").write_text(json.dumps(manifest))
     with open(run_dir / "trials.jsonl", "w") as f:
         for r in records:

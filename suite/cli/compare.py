@@ -275,20 +275,23 @@ def _shared_steps(trials, steps, *, pose: dict) -> dict:
     """Cycle steps of the run's scenes stored in the dataset once, under another scene (identical
     content, e.g. the last return of a fixed station): (scene key, can id, kind) -> problem_id.
     Found by posing each scene's cycle again (goal IK, as the dataset was built: `pose`, the
-    dataset's `pose_settings`)."""
+    dataset's `pose_settings`). A posed step is matched to a planned problem by the current
+    identity rule applied to both, so that last-bit noise of the posing (which differs between
+    machines) does not hide a match, whatever rule the dataset's own ids were made with."""
     from scenes.grasp_rule import truth_grasp
     from suite.problems.cycle import build_problems
     from suite.problems.identity import problem_id
 
     scenes = {t.problem.scene.key(): t.problem.scene for t in trials}
     planned = {(t.problem.scene.key(), t.problem.can_id, t.problem.kind) for t in trials}
+    stored_id = {problem_id(t.problem): t.meta["problem_id"] for t in trials if t.meta.get("problem_id")}
     shared = {}
     for key, scene in scenes.items():
         for p in build_problems(scene, [truth_grasp(scene, c) for c in scene.cans], time_limit_s=1.0, seed=scene.seed,
                                 **pose):
             k = (key, p.can_id, p.kind)
-            if p.pre_status is None and k not in planned and k not in steps:
-                shared[k] = problem_id(p)
+            if p.pre_status is None and k not in planned and k not in steps and problem_id(p) in stored_id:
+                shared[k] = stored_id[problem_id(p)]
     return shared
 
 

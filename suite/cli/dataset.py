@@ -120,7 +120,8 @@ def _verify(args: argparse.Namespace) -> int:
     print(file=sys.stderr)
     v = counts["references"]
     print(f"dataset {args.name}: {counts['problems']} problems and {counts['cycle_steps']} stored cycle steps in "
-          f"{counts['scenes']} scenes verified (hashes, references valid at the validator's resolution); exact "
+          f"{counts['scenes']} scenes verified (hashes, problem_ids under identity rule {counts['identity_rule']}, "
+          f"references valid at the validator's resolution); exact "
           f"verdict of the references: {v['certified']} certified, {v['unproved']} unproved, {v['collision']} in "
           f"collision" + ("" if counts["references_must_be_certified"] else
                           " (a dataset built before certification: counted, not required)"))
@@ -144,7 +145,8 @@ def _show(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(info))
         return 0
-    print(f"dataset {info['name']} (tier {info['tier']}, hash {info['hash']}): {info['problems']} problems, "
+    print(f"dataset {info['name']} (tier {info['tier']}, hash {info['hash']}, identity rule {info['identity_rule']}): "
+          f"{info['problems']} problems, "
           f"{info['distinct']} distinct, {info['trivial']} trivial ({info['trivial'] / max(info['problems'], 1):.0%})")
     print(f"{'family':10s} {'scenes':>6s} {'problems':>8s} {'trivial':>7s}  kinds")
     for fam, f in info["families"].items():

@@ -8,7 +8,12 @@ A dataset lives in `scenes/datasets/NAME/`:
   task waypoints, held can, gripper opening, removed cans, whether it is trivial, its difficulty,
   its split, its reference solution, its `problem_id` (content hash of world and configurations)
   and `record_hash` (hash of the whole line);
-- `manifest.json`: name, format version, dataset hash, counts, tiers, versions, build command.
+- `manifest.json`: name, format version, dataset hash, identity rule, counts, tiers, versions,
+  build command.
+
+A dataset's `problem_id`s were made with one identity rule (`scenes.identity_rule`), named by the
+manifest's `identity_rule` (absent: `round9`, the rule of the datasets up to recycle-v3). Its ids
+are checked with that rule; a newly built dataset uses the current one.
 
 Loading needs no scene generation and no IK: the same problems on any machine.
 """
@@ -19,13 +24,14 @@ import dataclasses
 import hashlib
 import json
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import Field
 
 from planners.base import PlanningProblem, TaskWaypoint
 from scenes.errors import SuiteError
+from scenes.identity_rule import LEGACY_RULE, RULES
 from scenes.schema import load
 from scenes.scene import CanPose, HeldCan, Scene
 from suite.problems.identity import problem_id
@@ -99,10 +105,11 @@ class StoredProblem:
     removed_can_ids: tuple[int, ...]
 
 
-def problem_record(problem: PlanningProblem, meta: dict[str, Any]) -> dict[str, Any]:
-    """A problem as stored; `meta` adds trivial, difficulty, split and the reference."""
+def problem_record(problem: PlanningProblem, meta: dict[str, Any], *, rule: str) -> dict[str, Any]:
+    """A problem as stored, its id made with identity rule `rule`; `meta` adds trivial,
+    difficulty, split and the reference."""
     stored = StoredProblem(
-        problem_id=problem_id(problem), scene_key=problem.scene.key(), family=problem.scene.variant,
+        problem_id=problem_id(problem, rule=rule), scene_key=problem.scene.key(), family=problem.scene.variant,
         scene_seed=problem.scene.seed, kind=problem.kind, can_id=problem.can_id,
         q_start=np.asarray(problem.q_start, float).tolist(), q_goal=np.asarray(problem.q_goal, float).tolist(),
         X_WG_goal=_pose(problem.X_WG_goal),
@@ -287,6 +294,14 @@ class ManifestFields:
     name: Annotated[str, Field(min_length=1)] | None = None
     format_version: Annotated[int, Field(ge=1, le=FORMAT_VERSION)] = 1
     tiers: dict[str, list[str]] = dataclasses.field(default_factory=dict)
+    #: the rule its problem_ids were made with (`scenes.identity_rule`); absent in the datasets
+    #: built before rules had names, whose rule is `round9`
+    identity_rule: Literal[tuple(RULES)] = LEGACY_RULE  # type: ignore[valid-type]
+
+
+def identity_rule(manifest: dict[str, Any]) -> str:
+    """The identity rule of a dataset's problem_ids, from its manifest."""
+    return manifest.get("identity_rule", LEGACY_RULE)
 
 
 def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
@@ -378,6 +393,7 @@ def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
         if scenes[rec["scene_key"]].key() != rec["scene_key"]:
             raise SuiteError(f"dataset {name!r}: scene {rec['scene_key']} does not hash to its key (edited?)")
     records = _read_jsonl(directory / PROBLEMS_FILE)
+    rule = identity_rule(manifest)
     must_certify = bool(manifest.get("references_certified"))
     verdicts = {"certified": 0, "unproved": 0, "collision": 0}
     for i, (lineno, _, rec) in enumerate(records):
@@ -385,8 +401,9 @@ def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
         if record_hash(rec) != rec.get("record_hash"):
             raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): record hash mismatch (edited?)")
         problem = problem_from_record(rec, scenes[rec["scene_key"]], time_limit_s=1.0)
-        if problem_id(problem) != pid:
-            raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): content does not hash to its problem_id")
+        if problem_id(problem, rule=rule) != pid:
+            raise SuiteError(f"dataset {name!r}: problem {pid} (line {lineno}): content does not hash to its problem_id "
+                             f"(identity rule {rule})")
         world = collision_world(problem)
         path = np.asarray(rec["reference"]["path"], float)
         reason = validate_path(problem, path, world)
@@ -416,7 +433,7 @@ def verify_dataset(name: str, *, progress=None) -> dict[str, int]:
         raise SuiteError(f"dataset {name!r}: dataset hash {h} != manifest's {manifest.get('hash')}")
     bench = sum(1 for _, _, rec in records if rec.get("benchmark", True))
     return {"scenes": len(scene_rows), "problems": bench, "cycle_steps": len(records) - bench,
-            "references": verdicts, "references_must_be_certified": must_certify}
+            "identity_rule": rule, "references": verdicts, "references_must_be_certified": must_certify}
 
 
 def summary(ds: Dataset) -> dict[str, Any]:
@@ -434,7 +451,7 @@ def summary(ds: Dataset) -> dict[str, Any]:
                       for k in ds.meta], float)
     qs = (0.0, 0.25, 0.5, 0.75, 1.0)
     return {
-        "name": ds.name, "tier": ds.tier, "hash": ds.hash,
+        "name": ds.name, "tier": ds.tier, "hash": ds.hash, "identity_rule": identity_rule(ds.manifest),
         "problems": len(ds.problems), "distinct": len(ds.meta),
         "trivial": int(sum(bool(m["trivial"]) for m in ds.meta.values())),
         "families": {k: {"scenes": len(v["scenes"]), "problems": v["problems"], "trivial": v["trivial"],

@@ -20,10 +20,7 @@ import json
 import numpy as np
 
 from planners.base import PlanningProblem
-
-#: Decimals kept when hashing configurations (rad) and poses (m): far below any planner's
-#: tolerance, far above float noise of a JSON round trip.
-DECIMALS = 9
+from scenes.identity_rule import CURRENT_RULE, hashed_list, hashed_scalar
 
 
 @functools.lru_cache(maxsize=1)
@@ -37,35 +34,41 @@ def robot_hash() -> str:
     return h.hexdigest()[:16]
 
 
-def _r(values) -> list:
-    return np.round(np.asarray(values, float), DECIMALS).tolist()
+def world_content(problem: PlanningProblem, *, rule: str = CURRENT_RULE) -> dict:
+    """The collision world of a problem as plain values (what its identity hashes), its floats
+    written by identity rule `rule` (`scenes.identity_rule`)."""
+    def r(values):
+        return hashed_list(values, rule=rule)
 
-
-def world_content(problem: PlanningProblem) -> dict:
-    """The collision world of a problem as plain values (what its identity hashes)."""
     spec = problem.scene.spec
     gone = set(problem.removed_can_ids) | ({problem.held.can.id} if problem.held is not None else set())
-    cans = sorted(_r(c.X_WC()) for c in problem.scene.cans if c.id not in gone)
+    cans = sorted(r(c.X_WC()) for c in problem.scene.cans if c.id not in gone)
     held = None
     if problem.held is not None:
-        held = {"X_GC": _r(problem.held.X_GC), "margin_m": spec.grasp.held_margin_m}
+        held = {"X_GC": r(problem.held.X_GC), "margin_m": spec.grasp.held_margin_m}
     return {
         "robot": robot_hash(),
-        "obstacles": [{"shape": o.shape, "size_m": _r(o.size_m), "X_WO": _r(o.X_WO),
+        "obstacles": [{"shape": o.shape, "size_m": r(o.size_m), "X_WO": r(o.X_WO),
                        "rests_held_can": o.name == "plate"} for o in spec.obstacles()],
         "can": [spec.can.radius_m, spec.can.height_m],
         "cans": cans,
         "held": held,
-        "gripper_opening_m": round(float(problem.gripper_opening_m), DECIMALS),
+        "gripper_opening_m": hashed_scalar(problem.gripper_opening_m, rule=rule),
     }
 
 
-def problem_id(problem: PlanningProblem) -> str:
-    """The problem's content hash (20 hex digits): its world, q_start and q_goal."""
+def problem_id(problem: PlanningProblem, *, rule: str = CURRENT_RULE) -> str:
+    """The problem's content hash (20 hex digits): its world, q_start and q_goal.
+
+    Args:
+        problem: the problem.
+        rule: the identity rule (`scenes.identity_rule.RULES`): the current one for problems posed
+            now; a frozen dataset's own (its manifest's `identity_rule`) to check its stored ids.
+    """
     blob = {
-        "world": world_content(problem),
-        "q_start": None if problem.q_start is None else _r(problem.q_start),
-        "q_goal": None if problem.q_goal is None else _r(problem.q_goal),
+        "world": world_content(problem, rule=rule),
+        "q_start": None if problem.q_start is None else hashed_list(problem.q_start, rule=rule),
+        "q_goal": None if problem.q_goal is None else hashed_list(problem.q_goal, rule=rule),
     }
     return hashlib.sha256(json.dumps(blob, sort_keys=True).encode()).hexdigest()[:20]
 

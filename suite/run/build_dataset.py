@@ -41,6 +41,7 @@ from suite.problems.dataset import (
     problem_record,
     scene_record,
 )
+from scenes.identity_rule import CURRENT_RULE
 from suite.problems.identity import problem_id, straight_line
 from suite.run.references import clearance_summary, plan_references, straight_certified
 from suite.run.witnesses import MIN_WITNESS_CLEARANCE_M, choose_witness, witness_with_margin
@@ -292,7 +293,7 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
     chosen_ids = {pid for pid, _ in chosen}
     # Trivial problems left out of the benchmark are kept as cycle steps (`benchmark: false`), so
     # that every stored scene can still be executed in physics cycle by cycle.
-    records = [problem_record(p, {**m, "benchmark": pid in chosen_ids}) for pid, (p, m) in solved]
+    records = [problem_record(p, {**m, "benchmark": pid in chosen_ids}, rule=CURRENT_RULE) for pid, (p, m) in solved]
     used_scenes = {r["scene_key"] for r in records if r["benchmark"]}
     records = [r for r in records if r["scene_key"] in used_scenes]
     scene_recs = [s for s in scene_recs if s["scene_key"] in used_scenes]
@@ -320,6 +321,7 @@ def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar
         "name": settings.name,
         "format_version": FORMAT_VERSION,
         "hash": dataset_hash(scene_lines, records),
+        "identity_rule": CURRENT_RULE,
         "counts": {"scenes": len(scene_recs), "problems": sum(r["benchmark"] for r in records),
                    "trivial": sum(r["trivial"] and r["benchmark"] for r in records),
                    "cycle_steps_stored": sum(not r["benchmark"] for r in records),

@@ -251,14 +251,16 @@ def versions() -> dict[str, str | None]:
 
 
 def write_manifest(out: Path, config: CompareConfig, *, argv: list[str]) -> None:
+    from scenes.identity_rule import CURRENT_RULE
     from suite.run.executors import cpu_description
 
-    dataset = None
+    dataset, rule = None, CURRENT_RULE  # the rule of the run's problem_ids
     if config.dataset:
-        from suite.problems.dataset import dataset_dir, dataset_filters, parse_dataset_arg, read_manifest
+        from suite.problems.dataset import dataset_dir, dataset_filters, identity_rule, parse_dataset_arg, read_manifest
 
         name, tier = parse_dataset_arg(config.dataset)
-        dataset = {"name": name, "tier": tier, "hash": read_manifest(dataset_dir(name))["hash"]}
+        ds_manifest = read_manifest(dataset_dir(name))
+        dataset, rule = {"name": name, "tier": tier, "hash": ds_manifest["hash"]}, identity_rule(ds_manifest)
         filters = dataset_filters(config.dataset)
         if filters:
             dataset["filters"] = {field: sorted(values) for field, values in filters.items()}
@@ -270,6 +272,7 @@ def write_manifest(out: Path, config: CompareConfig, *, argv: list[str]) -> None
         "command": " ".join(["python -m suite"] + argv),
         "config": dataclasses.asdict(config),
         "dataset": dataset,
+        "identity_rule": rule,
         "versions": versions(),
         "git_commit": git_commit(),
         "machine": {**cpu_description(), "platform": platform.platform()},

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from scenes.errors import SuiteError
+from scenes.identity_rule import CURRENT_RULE
 from suite.problems.dataset import load_dataset, summary, verify_dataset
 from suite.problems.identity import problem_id
 from suite.run.build_dataset import BuildSettings, build_dataset
@@ -40,6 +41,7 @@ def test_round_trip_same_problems_and_hashes(small):
     d, manifest = small
     ds = load_dataset(str(d))
     assert ds.hash == manifest["hash"] and len(ds.problems) == manifest["counts"]["problems"]
+    assert manifest["identity_rule"] == CURRENT_RULE  # a new dataset's ids are made with the current rule
     assert len(set(ds.ids)) == len(ds.ids)
     for pid, p in zip(ds.ids, ds.problems):
         assert problem_id(p) == pid  # the loaded problem hashes to what was stored
@@ -70,7 +72,8 @@ def test_quick_tier_is_a_subset_of_the_test_split(small):
 
 def test_verify_passes_then_catches_a_hand_edit(small, tmp_path):
     d, _ = small
-    assert verify_dataset(str(d))["problems"] > 0
+    counts = verify_dataset(str(d))
+    assert counts["problems"] > 0 and counts["identity_rule"] == CURRENT_RULE
     edited = _copy(d, tmp_path / "edited")
     lines = (edited / "problems.jsonl").read_text().splitlines()
     rec = json.loads(lines[1])
@@ -79,6 +82,15 @@ def test_verify_passes_then_catches_a_hand_edit(small, tmp_path):
     (edited / "problems.jsonl").write_text("\n".join(lines) + "\n")
     with pytest.raises(SuiteError, match=rf"problem {rec['problem_id']} \(line 2\)"):
         verify_dataset(str(edited))
+
+
+def test_a_manifest_with_an_unknown_identity_rule_is_one_line(small, tmp_path):
+    d, _ = small
+    edited = _copy(d, tmp_path / "rule")
+    manifest = json.loads((edited / "manifest.json").read_text())
+    (edited / "manifest.json").write_text(json.dumps({**manifest, "identity_rule": "round7"}))
+    with pytest.raises(SuiteError, match=r"identity_rule.*round7.*round9-unsigned-zero"):
+        load_dataset(str(edited))
 
 
 def test_verify_rejects_a_colliding_reference(small, tmp_path):

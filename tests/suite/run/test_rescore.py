@@ -14,6 +14,7 @@ from synthetic_runs import synthetic_records, write_run
 from scenes.fcl_world import CollisionWorld
 from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp, waypoint_pose
+from scenes.identity_rule import CURRENT_RULE
 from scenes.scene import HeldCan
 from scenes.spec import load_spec
 from suite.run.records import read_trials
@@ -150,11 +151,12 @@ def test_a_dataset_run_takes_problems_and_references_from_the_dataset(tmp_path, 
     scene_line = json.dumps(scene_record(world.scene, split="test"))
     prob = problem_record(problem, {"benchmark": True, "trivial": False, "difficulty": 0.1, "split": "test",
                                     "straight_length_rad": length, "reference_length_rad": length,
-                                    "reference": {"path": reference.tolist()}})
+                                    "reference": {"path": reference.tolist()}}, rule=CURRENT_RULE)
     (ds_dir / "scenes.jsonl").write_text(scene_line + "\n")
     (ds_dir / "problems.jsonl").write_text(json.dumps(prob) + "\n")
     h = dataset_hash([scene_line], [prob])
-    (ds_dir / "manifest.json").write_text(json.dumps({"format_version": 1, "hash": h, "tiers": {}}))
+    (ds_dir / "manifest.json").write_text(json.dumps({"format_version": 1, "hash": h, "tiers": {},
+                                                      "identity_rule": CURRENT_RULE}))
     # The run's record names the problem by id and lacks the reference (it comes from the dataset);
     # a second record names a problem the dataset does not hold.
     mine = {**rec, "problem_id": prob["problem_id"]}
