@@ -4,7 +4,6 @@ are reported at once, a trial's path depends on its seed alone, an optimizing pl
 import pickle
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +23,10 @@ REPO = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def problems(wall_scene):
+    # A budget with a wide margin: rrt solves these in well under a second, and returns as soon as
+    # it has; a success must not hang on the machine's speed. (Tests of a budget set their own.)
     scene = wall_scene
-    return build_problems(scene, [truth_grasp(scene, scene.cans[0])], time_limit_s=5.0, seed=3)
+    return build_problems(scene, [truth_grasp(scene, scene.cans[0])], time_limit_s=60.0, seed=3)
 
 
 @pytest.fixture(scope="module")
@@ -71,13 +72,12 @@ def test_endpoint_in_collision_is_reported_at_once(transit, end):
     world = collision_world(transit)
     q = _colliding_configuration(world, seed=5)
     problem = transit.with_(q_start=q) if end == "start" else transit.with_(q_goal=q)
-    t0 = time.perf_counter()
     r = make_planner("rrt").plan(problem)
-    elapsed_s = time.perf_counter() - t0
     assert r.status is (PlanStatus.INVALID_START if end == "start" else PlanStatus.INVALID_GOAL)
     assert r.path is None and r.stats["reason"] == "in collision"
     assert r.stats["reason_code"] == "endpoint_in_collision" and r.stats["solver"] == "RRTConnect"
-    assert elapsed_s < 0.5
+    # at once: before any search (no solve, no collision checks of its own in the stats)
+    assert set(r.stats) == {"reason", "reason_code", "solver"}
 
 
 def test_ik_failure_passes_through(transit):
@@ -116,7 +116,7 @@ def test_same_seed_same_path_across_processes(transit, tmp_path):
         "r = make_planner('rrt').plan(p)\n"
         "sys.stdout.write(r.status.value + ' ' + r.path.tobytes().hex())\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=300)
     assert out.returncode == 0, out.stderr
     status, hexpath = out.stdout.split()
     assert status == "success"
@@ -125,16 +125,14 @@ def test_same_seed_same_path_across_processes(transit, tmp_path):
 
 
 def test_optimizing_planner_solves_transit(transit):
-    budget_s = 1.0
-    t0 = time.perf_counter()
+    budget_s = 1.0  # over ten times what its first solution takes on a busy 2-core machine
     r = make_planner("aorrtc", AORRTCConfig(time_limit_s=budget_s)).plan(transit)
-    elapsed_s = time.perf_counter() - t0
     assert r.status is PlanStatus.SUCCESS
     assert collision_world(transit).path_free(r.path, resolution_rad=0.01) == -1
     assert np.array_equal(r.path[0], transit.q_start) and np.array_equal(r.path[-1], transit.q_goal)
     assert r.stats["solver"] == "AORRTC" and r.stats["best_cost"] > 0
-    # it runs to its budget (less the simplification share), not beyond it by much
-    assert r.stats["solve_time_s"] >= 0.8 * budget_s and elapsed_s < budget_s + 2.0
+    # it runs to its budget (less the simplification share)
+    assert r.stats["solve_time_s"] >= 0.8 * budget_s
 
 
 def test_drop_collinear_keeps_corners_only():
@@ -153,11 +151,12 @@ def test_bad_config_is_a_user_error():
 
 
 def test_optimizing_planner_records_its_best_cost_over_time(transit):
-    r = make_planner("bitstar").plan(transit.with_(time_limit_s=0.6))
+    # 2 s: slices of about 0.1 s, so that even a slow machine's overrun of each leaves several
+    r = make_planner("bitstar").plan(transit.with_(time_limit_s=2.0))
     points = r.stats["progress"]
     assert 5 <= len(points) <= 25  # one per slice of the budget (20 slices)
     times = [t for t, _ in points]
-    assert times == sorted(times) and times[-1] <= 0.6
+    assert times == sorted(times) and 0 < times[-1] <= r.stats["solve_time_s"]  # within the solve
     costs = [c for _, c in points if c is not None]
     assert r.status is not PlanStatus.SUCCESS or costs  # a success had a solution at some slice
     assert all(b <= a + 1e-9 for a, b in zip(costs, costs[1:]))  # the best cost never worsens
