@@ -20,6 +20,10 @@ from suite.scoring.validate import validate_path
 
 # Small, fast regions for tests: IrisZo with one alternation (about 1 s a region on one core).
 FAST = {"iris": "zo", "max_iterations": 1, "num_particles": 100, "check_rounds": 1}
+#: The planning budget of tests whose outcome is not about the budget: a wide margin over what gcs
+#: needs (under a second, or a few with an online region), so that a busy machine changes nothing;
+#: gcs returns as soon as it has its answer.
+ROOMY_S = 60.0
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +31,8 @@ def built(open_transit, tmp_path_factory):
     """One trial of gcs on the open transit with an empty region cache (regions built in prepare)."""
     cache = tmp_path_factory.mktemp("regions")
     grown_before = gcs_regions.GROWN_IN_PROCESS
-    record = run_problem(open_transit, planner="gcs", planner_config={**FAST, "regions_dir": str(cache)}, run_seed=0)
+    record = run_problem(open_transit.with_(time_limit_s=ROOMY_S), planner="gcs",
+                         planner_config={**FAST, "regions_dir": str(cache)}, run_seed=0)
     return record, cache, gcs_regions.GROWN_IN_PROCESS - grown_before
 
 
@@ -51,7 +56,7 @@ def test_second_prepare_reuses_the_cache(built, open_transit):
     planner = GcsPlanner(GcsConfig(**FAST, regions_dir=str(cache)))  # a fresh process-level planner
     before = gcs_regions.GROWN_IN_PROCESS
     planner.prepare(open_transit)
-    r = planner.plan(open_transit)
+    r = planner.plan(open_transit.with_(time_limit_s=ROOMY_S))
     assert gcs_regions.GROWN_IN_PROCESS == before
     assert r.status is PlanStatus.SUCCESS and r.stats["regions_cache"] == "hit"
     assert r.stats["offline_s"] == pytest.approx(record["stats"]["offline_s"])
@@ -95,9 +100,9 @@ def _invalid_region_cache(problem, directory, options):
 def test_an_invalid_region_gives_a_path_the_validator_rejects(wall_transit, tmp_path):
     cfg = GcsConfig(**FAST, regions_dir=str(tmp_path), build_regions=False, max_repairs=0)
     _invalid_region_cache(wall_transit, tmp_path, cfg.region_options())
-    record = run_problem(wall_transit, planner="gcs", planner_config={**FAST, "regions_dir": str(tmp_path),
-                                                                       "build_regions": False, "max_repairs": 0},
-                         run_seed=0)
+    record = run_problem(wall_transit.with_(time_limit_s=ROOMY_S), planner="gcs",
+                         planner_config={**FAST, "regions_dir": str(tmp_path), "build_regions": False,
+                                         "max_repairs": 0}, run_seed=0)
     assert record["stats"]["num_regions"] == 1 and record["stats"]["regions_cache"] == "hit"
     assert record["status"] == "invalid_solution"
     assert "collision" in record["stats"]["invalid_reason"]
@@ -109,7 +114,7 @@ def test_with_repairs_on_a_colliding_path_is_not_returned(wall_transit, tmp_path
     cfg = GcsConfig(**FAST, regions_dir=str(tmp_path), build_regions=False)
     assert cfg.max_repairs > 0
     _invalid_region_cache(wall_transit, tmp_path, cfg.region_options())
-    r = GcsPlanner(cfg).plan(wall_transit)
+    r = GcsPlanner(cfg).plan(wall_transit.with_(time_limit_s=ROOMY_S))
     assert r.status is PlanStatus.NO_SOLUTION and r.path is None
     assert "collides" in r.stats["reason"]
 
@@ -290,13 +295,14 @@ def test_an_end_no_segment_joins_gets_an_online_region_in_planning_time(wall_tra
     b = np.concatenate([q1 + 0.02, -(q1 - 0.02)])
     RegionSet(h, [A], [b], [q1], [0.0], offline_s=1.0, edges=[], iris=options.iris,
               checked=[gcs_regions.WORLD_BUILT]).save(tmp_path / f"{h}.npz")
-    r = GcsPlanner(cfg).plan(wall_transit)
+    problem = wall_transit.with_(time_limit_s=ROOMY_S)  # the online region grows in planning time
+    r = GcsPlanner(cfg).plan(problem)
     assert r.status is PlanStatus.NO_SOLUTION and r.stats["reason_code"] == "regions_disconnected"
     assert r.stats["start_join"] == "none" and r.stats["goal_join"] == "inside" and r.stats["online_regions"] == 0
     assert "joins the start" in r.stats["reason"]
     planner = GcsPlanner(GcsConfig(**FAST, regions_dir=str(tmp_path), build_regions=False))
-    planner.prepare(wall_transit)
-    r = planner.plan(wall_transit)
+    planner.prepare(problem)
+    r = planner.plan(problem)
     assert r.stats["online_regions"] == 1 and r.stats["start_join"] == "inside"
     assert r.stats["solve_time_s"] >= r.stats["join_s"] > 0
 
