@@ -55,14 +55,21 @@ def cluster():
     c.close()
 
 
+#: The hard limit of jobs that should finish (they take well under a second): only a hang reaches
+#: it, so it can be generous for a slow or busy machine (a job's limit counts its unpickling too).
+ROOMY_S = 120.0
+
+
 def _outcomes(ex, jobs):
     return {o.job.key: o for o in ex.run(jobs)}
 
 
 def test_same_seed_same_records_as_local_pool(tmp_path):
     planners = ("ik", "rrt") if importlib.util.find_spec("planners.ompl_rrt") else ("ik",)
+    # a budget with a wide margin (rrt solves these in well under a second and returns then): a
+    # trial timing out on a busy machine in one run and not the other would make the records differ
     cfg = CompareConfig(planners=planners, variant="wall", seed=3, scenes=1, cans=1, grasps="truth",
-                        time_limit_s=2.0, jobs=2, dataset=None)
+                        time_limit_s=30.0, jobs=2, dataset=None)
     trials = prepare_trials(cfg)
     records = {}
     for executor in ("local", "dask"):
@@ -88,14 +95,13 @@ def test_same_seed_same_records_as_local_pool(tmp_path):
 
 def test_hang_and_segfault_become_records_and_sandboxes_persist(cluster):
     ex = DaskExecutor(scheduler=cluster.scheduler_address)
-    jobs = [Job(f"ok{i}", _sandbox_pid, i, 20.0) for i in range(6)]
-    jobs += [Job("hang", _sleep, 60.0, 1.5), Job("segv", _segfault, None, 20.0)]
-    jobs += [Job(f"after{i}", _sandbox_pid, i, 20.0) for i in range(4)]
-    t0 = time.monotonic()
+    jobs = [Job(f"ok{i}", _sandbox_pid, i, ROOMY_S) for i in range(6)]
+    jobs += [Job("hang", _sleep, 600.0, 1.5), Job("segv", _segfault, None, ROOMY_S)]
+    jobs += [Job(f"after{i}", _sandbox_pid, i, ROOMY_S) for i in range(4)]
     got = _outcomes(ex, jobs)
-    assert time.monotonic() - t0 < 30.0
     assert set(got) == {j.key for j in jobs}
-    assert got["hang"].failure == "killed_timeout" and 1.5 <= got["hang"].wall_time_s < 5.0
+    # killed at its hard limit, not before (it would have slept 600 s: how soon after is the machine's)
+    assert got["hang"].failure == "killed_timeout" and got["hang"].wall_time_s >= 1.5
     assert got["segv"].failure == "crash" and str(-signal.SIGSEGV) in got["segv"].message
     ok = [o for k, o in got.items() if k not in ("hang", "segv")]
     assert all(o.failure is None for o in ok)
@@ -109,15 +115,15 @@ def test_hang_and_segfault_become_records_and_sandboxes_persist(cluster):
 def test_killed_worker_is_retried_or_recorded_as_crash(cluster, tmp_path):
     ex = DaskExecutor(scheduler=cluster.scheduler_address)
     # the worker running "once" dies once: its tasks are retried elsewhere (allowed-failures=1)
-    jobs = [Job("once", _kill_worker_first_time, str(tmp_path / "marker"), 30.0)]
-    jobs += [Job(f"ok{i}", _sleep, 0.2, 30.0) for i in range(4)]
+    jobs = [Job("once", _kill_worker_first_time, str(tmp_path / "marker"), ROOMY_S)]
+    jobs += [Job(f"ok{i}", _sleep, 0.2, ROOMY_S) for i in range(4)]
     got = _outcomes(ex, jobs)
     assert set(got) == {j.key for j in jobs}
     assert (tmp_path / "marker").exists()
     assert got["once"].failure is None and got["once"].result == {"attempt": "retry"}
     assert all(got[f"ok{i}"].result == {"slept_s": 0.2} for i in range(4))
     # a task that kills every worker it lands on: KilledWorker -> a crash outcome; the run finishes
-    jobs = [Job("always", _kill_worker_always, None, 30.0)]
+    jobs = [Job("always", _kill_worker_always, None, ROOMY_S)]
     got = _outcomes(ex, jobs)
     assert set(got) == {"always"}
     assert got["always"].failure == "crash" and "Dask worker died" in got["always"].message
@@ -130,18 +136,16 @@ def test_a_task_the_cluster_cannot_run_stops_the_run(cluster):
     # the sandbox is the cluster's, not the trial's, so no record is made for it
     ex = DaskExecutor(scheduler=cluster.scheduler_address)
     with pytest.raises(SuiteError, match="could not run trial lam"):
-        _outcomes(ex, [Job("lam", lambda p: {"x": p}, 1, 10.0)])
-    assert _outcomes(ex, [Job("ok", _sleep, 0.1, 10.0)])["ok"].result == {"slept_s": 0.1}
+        _outcomes(ex, [Job("lam", lambda p: {"x": p}, 1, ROOMY_S)])
+    assert _outcomes(ex, [Job("ok", _sleep, 0.1, ROOMY_S)])["ok"].result == {"slept_s": 0.1}
 
 
 def test_parent_backstop_cancels_a_task_past_its_deadline(cluster, monkeypatch):
     import suite.run.dask_executor as dx
 
     # make the parent's deadline (2 x hard limit + grace) fall 1 s after the task is seen running,
-    # well before the worker-side kill at the 5 s hard limit
-    monkeypatch.setattr(dx, "BACKSTOP_GRACE_S", -9.0)
+    # well before the worker-side kill at the 10 s hard limit: the message says which one stopped it
+    monkeypatch.setattr(dx, "BACKSTOP_GRACE_S", -19.0)
     ex = DaskExecutor(scheduler=cluster.scheduler_address)
-    t0 = time.monotonic()
-    got = _outcomes(ex, [Job("stuck", _sleep, 8.0, 5.0)])
-    assert time.monotonic() - t0 < 4.5
+    got = _outcomes(ex, [Job("stuck", _sleep, 60.0, 10.0)])
     assert got["stuck"].failure == "killed_timeout" and "cancelled by the parent" in got["stuck"].message
