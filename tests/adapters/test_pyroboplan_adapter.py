@@ -43,7 +43,7 @@ def test_the_adapter_plans_from_the_export_alone_and_its_results_import(tmp_path
     results = tmp_path / "pyroboplan.jsonl"
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}  # nothing of the suite on its path
     subprocess.run([pyroboplan_python(), str(ADAPTER), str(export), "--out", str(results),
-                    "--problems", f"{trivial},{hard}"], check=True, cwd=tmp_path, env=env, timeout=120,
+                    "--problems", f"{trivial},{hard}"], check=True, cwd=tmp_path, env=env, timeout=600,
                    capture_output=True)
     lines = [json.loads(line) for line in results.read_text().splitlines()]
     assert {ln["problem_id"] for ln in lines} == {trivial, hard}

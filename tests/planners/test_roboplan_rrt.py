@@ -73,7 +73,8 @@ def test_solves_dataset_problems_and_the_validator_accepts(quick, family, kind):
     from suite.run.trial import run_problem
 
     pid, problem = _first(quick, family=family, kind=kind)
-    rec = run_problem(problem, planner="roboplan-rrt", planner_config={}, run_seed=0)
+    # a budget with a wide margin: what is tested is the success, not how fast it comes
+    rec = run_problem(problem.with_(time_limit_s=60.0), planner="roboplan-rrt", planner_config={}, run_seed=0)
     assert rec["status"] == "success", rec["stats"]  # success after the suite's validator and TOPP-RA
     assert rec["stats"].get("invalid_reason") is None
     path = np.asarray(rec["path"])
