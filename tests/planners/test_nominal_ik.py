@@ -18,8 +18,11 @@ from planners.worlds import collision_world
 
 @pytest.fixture(scope="module")
 def cycle(open_scene):
+    # A budget with a wide margin: the first plan of a scene builds its Drake diagram inside the
+    # clock (2 s of a 5 s budget on a busy machine); the planner returns as soon as it is done.
+    # (The budget's own test sets its own.)
     scene = open_scene
-    return build_problems(scene, [truth_grasp(scene, scene.cans[0])], time_limit_s=5.0, seed=3)
+    return build_problems(scene, [truth_grasp(scene, scene.cans[0])], time_limit_s=60.0, seed=3)
 
 
 @pytest.fixture(scope="module")
@@ -134,7 +137,7 @@ def stalling_knot():
     quick tier's `ik` successes that needed a retry again without retries.)"""
     from suite.problems.dataset import load_dataset
 
-    ds = load_dataset("recycle-v3:quick", time_limit_s=5.0)
+    ds = load_dataset("recycle-v3:quick", time_limit_s=60.0)  # wide margin, as for `cycle`
     return dict(zip(ds.ids, ds.problems))["d2fc5d3ad7cd3895b004"]
 
 
