@@ -30,7 +30,7 @@ def find_chromium() -> str | None:
 class Chromium:
     """One headless Chromium with one page. Use as a context manager."""
 
-    def __init__(self, binary: str, *, width: int = 1400, height: int = 1000, timeout_s: float = 30.0):
+    def __init__(self, binary: str, *, width: int = 1400, height: int = 1000, timeout_s: float = 120.0):
         from tornado.websocket import websocket_connect
 
         self.timeout_s = timeout_s
