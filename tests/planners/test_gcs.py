@@ -365,7 +365,7 @@ def test_world_regions_carry_a_window_return_through_the_opening(tmp_path):
 
     ds = load_dataset("recycle-v3:quick")
     pid = next(i for i in ds.ids if ds.meta[i]["family"] == "window" and ds.meta[i]["kind"] == "return")
-    problem = ds.problems[ds.ids.index(pid)]
+    problem = ds.problems[ds.ids.index(pid)].with_(time_limit_s=ROOMY_S)
     cfg = GcsConfig(regions_dir=str(tmp_path))
     rs, info = gcs_regions.regions_for(problem, cfg.region_options(), cache_dir=tmp_path, fresh=True)
     assert info["build"]["ends_connected"] and 2 <= len(rs) <= 2 * cfg.max_regions_per_world
