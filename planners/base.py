@@ -151,12 +151,18 @@ class Planner(Protocol):
 
     def __init__(self, config: Any = None) -> None: ...
 
+    def prepare(self, problem: PlanningProblem) -> None:
+        """Build what depends on the problem's world only (a Drake diagram, a program; nothing is
+        fine): the orchestrator calls it before starting the clock and records its time as
+        `setup_time_s`, as it builds the python-fcl worlds of every problem outside the clock."""
+
     def plan(self, problem: PlanningProblem) -> PlanResult: ...
 
-    # Optional: `prepare(problem) -> None` builds what depends on the problem's world only (a Drake
-    # diagram, a program); the orchestrator calls it before starting the clock and records its
-    # time as `setup_time_s`, as it builds the python-fcl world of every problem outside the clock.
     # `PlannerBase` below implements this protocol as a template: a planner then writes `solve` only.
+
+
+#: The methods a planner class must have (`planners.registry.planner_class` checks them).
+PLANNER_METHODS = ("prepare", "plan")
 
 
 #: The cause a failure status names by itself: a planner's status that gave no cause (filled in
@@ -217,9 +223,9 @@ class PlannerBase:
         it cannot solve."""
         import time
 
-        from planners.worlds import collision_world
+        from planners.worlds import planning_world
 
-        world = collision_world(problem)
+        world = planning_world(problem)
         bad = check_endpoints(problem, world)
         if bad is not None:
             return shared_stats(bad, solver=self.solver)

@@ -63,11 +63,11 @@ def task_chain(problem, *, seed: int, rrt_time_s: float = 2.0) -> tuple[np.ndarr
         (polyline or None if fewer than two poses have IK, info: ik_s, rrt_s, poses, poses_solved,
         rrt_joins, gaps (consecutive poses left unjoined)).
     """
-    from planners.worlds import collision_world, drake_plan_scene
+    from planners.worlds import drake_plan_scene, planning_world
     from scenes.grasp_rule import waypoint_pose
     from scenes.ik import Q_READY, IkOptions, PoseIk
 
-    world = collision_world(problem)
+    world = planning_world(problem)
     t0 = time.perf_counter()
     wp = problem.scene.spec.waypoints
     X_plate, X_middle, X_bin = (waypoint_pose(p) for p in (wp.above_plate_m, wp.middle_m, wp.above_bin_m))

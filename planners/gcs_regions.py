@@ -171,9 +171,9 @@ class RegionBuilder:
 
 def _guide_path(problem, options: RegionOptions) -> np.ndarray | None:
     """The straight segment if free in the python-fcl world, else an RRT-Connect path, or None."""
-    from planners.worlds import collision_world
+    from planners.worlds import planning_world
 
-    world = collision_world(problem)
+    world = planning_world(problem)
     q0, q1 = np.asarray(problem.q_start, float), np.asarray(problem.q_goal, float)
     if world.motion_free(q0, q1, resolution_rad=0.01):
         return np.stack([q0, q1])
@@ -217,9 +217,9 @@ def grow_for_problem(rs: RegionSet, problem, builder: RegionBuilder) -> int:
     n0 = len(rs)
     q0, q1 = np.asarray(problem.q_start, float), np.asarray(problem.q_goal, float)
     added = 0
-    from planners.worlds import collision_world
+    from planners.worlds import planning_world
 
-    world = collision_world(problem)
+    world = planning_world(problem)
 
     def add(q, contain=None) -> bool:
         nonlocal added
@@ -313,11 +313,11 @@ def grow_for_world(rs: RegionSet, problem, builder: RegionBuilder) -> dict:
     its path with the python-fcl world and cut what collides (`checked_path`). Returns the build's
     figures (chain, regions, seconds)."""
     from planners.gcs_cover import chain_seeds, clique_seeds, free_task_samples, task_chain
-    from planners.worlds import collision_world
+    from planners.worlds import planning_world
 
     o = builder.options
     t0 = time.perf_counter()
-    world = collision_world(problem)
+    world = planning_world(problem)
     chain, info = task_chain(problem, seed=o.random_seed, rrt_time_s=o.guide_rrt_time_s)
     if chain is not None:
         ends = (chain[0], chain[-1])

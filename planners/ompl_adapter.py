@@ -1,7 +1,7 @@
 """The OMPL side of the joint-space planners: state space, python-fcl motion checks, seeding, path conversion.
 
 The state space is the arm's 7 joints (RealVectorStateSpace with the joint limits). States and
-motions are checked by the problem's python-fcl world (`planners.worlds.collision_world`): a state by
+motions are checked by the problem's python-fcl world (`planners.worlds.planning_world`): a state by
 `is_free`, a straight motion by `motion_samples_free` over samples at most `resolution_rad` apart
 in every joint: the end state and coarse samples first so that a blocked motion is rejected after
 few checks, then only the samples their distance bounds do not prove free. `OmplProblem` creates every OMPL object of one solve

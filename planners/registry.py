@@ -15,6 +15,7 @@ import importlib
 import importlib.util
 from importlib.metadata import entry_points
 
+from planners.base import PLANNER_METHODS
 from scenes.errors import SuiteError
 
 BUILTIN = {
@@ -72,7 +73,12 @@ def planner_class(name: str) -> type:
         if needed is not None and (exc.name or "").split(".")[0] == needed:
             raise _missing_extra(name) from None
         raise
-    return getattr(mod, attr)
+    cls = getattr(mod, attr)
+    missing = [m for m in PLANNER_METHODS if not callable(getattr(cls, m, None))]
+    if missing:
+        raise SuiteError(f"planner {name!r} ({table[name]}) has no {missing[0]}() method; a planner implements "
+                         f"{', '.join(PLANNER_METHODS)} (planners.base.Planner; PlannerBase gives a prepare that does nothing)")
+    return cls
 
 
 def parse_planner_list(text: str) -> list[str]:

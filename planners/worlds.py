@@ -1,16 +1,28 @@
-"""Per-process caches of the collision world and the plan-mode Drake scene of a problem.
+"""Per-process caches of the collision worlds and the plan-mode Drake scene of a problem.
 
 Problems cross process boundaries as plain values; each worker builds the heavy objects (Drake
 diagrams, python-fcl objects) once per distinct world and reuses them.
+
+Two python-fcl worlds answer the same questions: `collision_world`, the numpy reference, which the
+judge (validator, certifier, metrics) uses; and `planning_world`, which the planners check with:
+the compiled kernels (`scenes.fcl_compiled`) unless the environment's SUITE_CHECKER says
+`numpy` (`compare --checker numpy`: the fallback, the same answers at numpy's speed).
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 
+from scenes.errors import SuiteError
 from scenes.fcl_world import CollisionWorld
 
+#: The planners' checkers (`planning_world`), and the environment variable that chooses one.
+CHECKERS = ("compiled", "numpy")
+CHECKER_ENV = "SUITE_CHECKER"
+
 _FCL: dict[tuple, CollisionWorld] = {}
+_COMPILED: dict[tuple, CollisionWorld] = {}
 _DRAKE: dict[tuple, object] = {}
 MAX_CACHED = 64
 
@@ -40,11 +52,40 @@ def padded_worlds(padding_m: float):
 
 
 def collision_world(problem) -> CollisionWorld:
-    """The python-fcl world of a problem (robot with held can, remaining cans, opening)."""
+    """The python-fcl world of a problem (robot with held can, remaining cans, opening): the numpy
+    reference, the judge's."""
     key = (problem.world_key(), _PADDING_M)
     world = _FCL.get(key)
     if world is None:
         world = remember(_FCL, key, CollisionWorld(
+            problem.scene,
+            gripper_opening_m=problem.gripper_opening_m,
+            held=problem.held,
+            removed_can_ids=problem.removed_can_ids,
+            padding_m=_PADDING_M,
+        ))
+    return world
+
+
+def checker() -> str:
+    """The planners' checker in this process (SUITE_CHECKER, default `compiled`)."""
+    name = os.environ.get(CHECKER_ENV) or "compiled"
+    if name not in CHECKERS:
+        raise SuiteError(f"{CHECKER_ENV}={name!r} is not a checker; allowed: {', '.join(CHECKERS)}")
+    return name
+
+
+def planning_world(problem) -> CollisionWorld:
+    """The world the planners check with: the same questions and answers as `collision_world`,
+    decided by the compiled kernels (or the numpy world itself when the checker is `numpy`)."""
+    if checker() == "numpy":
+        return collision_world(problem)
+    from scenes.fcl_compiled import CompiledWorld
+
+    key = (problem.world_key(), _PADDING_M)
+    world = _COMPILED.get(key)
+    if world is None:
+        world = remember(_COMPILED, key, CompiledWorld(
             problem.scene,
             gripper_opening_m=problem.gripper_opening_m,
             held=problem.held,

@@ -72,6 +72,7 @@ class WorldBuild:
         env_rows = np.concatenate([self._spheres["env"][i][0] for i in env_parts])
         outer_e = np.concatenate([self._spheres["env"][i][1] for i in env_parts])
         inner_e = np.concatenate([self._spheres["env"][i][2] for i in env_parts])
+        self._inner_env = inner_e  # every scene sphere's inner radius (the compiled checks' exact distances use it)
         part_e = np.concatenate([[i] * len(self._spheres["env"][i][0]) for i in env_parts]).astype(int)
         S = len(env_rows)
         pp_grid = np.full((len(self.parts), n_obs), -1)

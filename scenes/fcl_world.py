@@ -57,8 +57,10 @@ from scenes.scene import HeldCan, Scene
 #: Bodies that form one rigid assembly with the gripper (Drake filters welded assemblies).
 GRIPPER_ASSEMBLY = frozenset({"iiwa_link_7", "body", "left_finger", "right_finger", "held_can"})
 
+
 class CollisionWorld(WorldBuild, MotionChecks):
-    """Robot + scene collision queries with python-fcl.
+    """Robot + scene collision queries with python-fcl (the numpy reference path; the planners'
+    compiled path is `scenes.fcl_compiled.CompiledWorld`, which decides the same).
 
     Args:
         scene: the scene (static boxes from its spec, cans as cylinders).
@@ -71,6 +73,9 @@ class CollisionWorld(WorldBuild, MotionChecks):
             states); the robot's own pairs are not padded (its capsules come within millimetres
             of each other in ordinary postures).
     """
+
+    #: which implementation decides (recorded with every planner's statistics)
+    engine = "numpy"
 
     def __init__(
         self,
@@ -116,6 +121,7 @@ class CollisionWorld(WorldBuild, MotionChecks):
         prims += [(f"can_{c.id}", "cylinder", (r_can, h_can), c.X_WC(), False) for c in scene.cans if c.id not in removed]
         if self.padding_m:
             prims = [(name, shape, grown_dims(shape, size, self.padding_m), X, exact) for name, shape, size, X, exact in prims]
+        self._obs_prims = prims  # (name, shape, size, X_WO, axis-aligned box), padding included
         for name, shape, size, X, exact in prims:
             self.obstacles.append((name, fcl.CollisionObject(fcl_geometry(shape, size), fcl.Transform(X[:3, :3], X[:3, 3]))))
             obs_c.append(X[:3, 3].copy())
@@ -146,6 +152,7 @@ class CollisionWorld(WorldBuild, MotionChecks):
         self._check = self._make_state_check()
         self.checks = 0  # state checks answered, for planner statistics
         self.query_s = 0.0  # seconds spent answering them (two clock reads a call: about 1% of a check)
+        self.fcl_calls = 0  # exact FCL collide() calls made for them (the pairs nothing cheaper decided)
 
     # --- kinematics
 
@@ -239,13 +246,19 @@ class CollisionWorld(WorldBuild, MotionChecks):
 
     def _exact(self, rows: np.ndarray, hits: np.ndarray, unsafe: list[int]) -> bool:
         """True if an FCL query finds a collision in a part-level pair of `hits` or `unsafe`."""
+        return self._exact_pairs(rows, set(self._pp.take(hits).tolist()).union(unsafe))
+
+    def _exact_pairs(self, rows: np.ndarray, pairs) -> bool:
+        """True if an FCL `collide` finds a collision in one of the part-level pairs (their ids)
+        placed by the world rows `rows`; counts the calls in `fcl_calls`."""
         placed: dict[int, fcl.CollisionObject] = {}
-        for k in set(self._pp.take(hits).tolist()).union(unsafe):
+        for k in pairs:
             i = self._pp_part[k]
             oi = placed.get(i) or placed.setdefault(i, self._place(i, rows))
             j, other = self._pp_other[k]
             if other is None:
                 other = placed.get(j) or placed.setdefault(j, self._place(j, rows))
+            self.fcl_calls += 1
             if fcl.collide(oi, other, self._req, fcl.CollisionResult()):
                 return True
         return False

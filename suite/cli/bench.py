@@ -20,6 +20,8 @@ TARGETS = {
     "attribution": "suite.bench.attribution",
     "agreement": "suite.bench.agreement",
     "budget-flip": "suite.bench.budget_flip",
+    "machine": "suite.bench.machine",
+    "kernel": "suite.bench.kernel",
 }
 
 

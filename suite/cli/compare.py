@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import datetime as dt
 import multiprocessing
+import os
 import sys
 import time
 from pathlib import Path
@@ -53,6 +54,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--memory-limit-mb", type=positive_int, default=None,
                    help=f"address-space cap of each worker process, MiB; a trial beyond it is recorded as a crash "
                         f"(out_of_memory) (default {d.memory_limit_mb})")
+    p.add_argument("--checker", default=None, choices=("compiled", "numpy"),
+                   help=f"what the planners' python-fcl checks run in: the compiled kernels or the numpy reference, "
+                        f"the same answers (default {d.checker}); the judge always uses the numpy reference")
     p.add_argument("--out", default=None, help="run directory (default results/<UTC timestamp>)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out, skipping recorded trials")
     p.add_argument("--config", default=None, metavar="YAML", help="settings from a YAML file (flags override it)")
@@ -352,6 +356,9 @@ def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path) -> i
         write_manifest,
     )
 
+    from planners.worlds import CHECKER_ENV
+
+    os.environ[CHECKER_ENV] = config.checker  # the workers (spawned from here) inherit it
     t0 = time.perf_counter()
     print(f"run directory: {out}", file=sys.stderr)
     if args.resume:

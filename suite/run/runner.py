@@ -66,6 +66,9 @@ class CompareConfig:
     memory_limit_mb: Annotated[int, Field(ge=256)] = DEFAULT_MEMORY_LIMIT_MB
     #: planning budgets (s): every planner runs every problem at each (empty: time_limit_s alone)
     budgets: tuple[Pos, ...] = ()
+    #: what the planners' python-fcl checks run in: the compiled kernels, or the numpy reference
+    #: (the same answers; `planners.worlds.planning_world`)
+    checker: Literal["compiled", "numpy"] = "compiled"
 
 
 def worker_init() -> None:

@@ -165,24 +165,24 @@ def failed_record(spec: TrialSpec, *, status: str, wall_time_s: float, stats: di
 
 def _run_trial(spec: TrialSpec) -> dict[str, Any]:
     from planners.registry import planner_class
-    from planners.worlds import collision_world
+    from planners.worlds import collision_world, planning_world
 
     problem = spec.problem
     record = trial_record(spec)
     t_setup = time.perf_counter()
-    world = collision_world(problem)
+    world = collision_world(problem)  # the judge's (numpy reference)
+    checks = planning_world(problem)  # the planners' (compiled unless SUITE_CHECKER=numpy); compiles here, in set-up
     result = None
     try:
         cls = planner_class(spec.planner)
         planner = cls(make_config(cls, spec.planner_config))
-        if hasattr(planner, "prepare"):  # world-only set-up, outside the clock for every planner alike
-            planner.prepare(problem)
+        planner.prepare(problem)  # world-only set-up, outside the clock for every planner alike
     except MemoryError:
         raise
     except Exception as exc:  # a bad config or a planner bug is this trial's error, not the run's
         result = _error_result(spec, exc)
     record["setup_time_s"] = time.perf_counter() - t_setup
-    checks0, query0 = world.checks, world.query_s
+    checks0, query0, fcl0 = checks.checks, checks.query_s, checks.fcl_calls
     t0 = time.perf_counter()
     if result is None:
         try:
@@ -192,7 +192,9 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
         except Exception as exc:
             result = _error_result(spec, exc)
     planning_time_s = time.perf_counter() - t0
-    fcl = (world.checks - checks0, world.query_s - query0)  # before the judge queries the world too
+    fcl = (checks.checks - checks0, checks.query_s - query0)
+    record["checker"] = checks.engine
+    record["fcl_collide_calls"] = checks.fcl_calls - fcl0  # the pairs nothing cheaper decided, while planning
     record["warm"] = spec.planner in _PLANNED  # False: this worker's first trial of the planner
     _PLANNED.add(spec.planner)
     record = judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s)
