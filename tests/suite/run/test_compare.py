@@ -60,7 +60,11 @@ def test_tiny_run_end_to_end(tiny_run):
     rrt = [r for r in recs if r["planner"] == "rrt"]
     assert all(r["status"] == "success" for r in rrt)
     assert all(r["metrics"]["duration_s"] > 0 for r in rrt if r["problem"] == "transit")
+    # the planners checked with the compiled kernels (the default), and each record says so
+    assert {r["checker"] for r in recs} == {"compiled"}
+    assert all(isinstance(r["fcl_collide_calls"], int) and r["fcl_collide_calls"] >= 0 for r in recs)
     manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["config"]["checker"] == "compiled" and manifest["identity_rule"] == "round9-unsigned-zero"
     assert manifest["versions"]["drake"].startswith("1.51")
     assert manifest["machine"]["cores"] >= 1
     assert (out / "summary.md").exists() and (out / "summary.csv").exists()
