@@ -54,10 +54,15 @@ def padded_worlds(padding_m: float):
 def collision_world(problem) -> CollisionWorld:
     """The python-fcl world of a problem (robot with held can, remaining cans, opening): the numpy
     reference, the judge's."""
+    return _cached_world(_FCL, CollisionWorld, problem)
+
+
+def _cached_world(cache: dict, cls, problem) -> CollisionWorld:
+    """The problem's world of class `cls` from `cache`, built on first use (this process's padding)."""
     key = (problem.world_key(), _PADDING_M)
-    world = _FCL.get(key)
+    world = cache.get(key)
     if world is None:
-        world = remember(_FCL, key, CollisionWorld(
+        world = remember(cache, key, cls(
             problem.scene,
             gripper_opening_m=problem.gripper_opening_m,
             held=problem.held,
@@ -82,17 +87,7 @@ def planning_world(problem) -> CollisionWorld:
         return collision_world(problem)
     from scenes.fcl_compiled import CompiledWorld
 
-    key = (problem.world_key(), _PADDING_M)
-    world = _COMPILED.get(key)
-    if world is None:
-        world = remember(_COMPILED, key, CompiledWorld(
-            problem.scene,
-            gripper_opening_m=problem.gripper_opening_m,
-            held=problem.held,
-            removed_can_ids=problem.removed_can_ids,
-            padding_m=_PADDING_M,
-        ))
-    return world
+    return _cached_world(_COMPILED, CompiledWorld, problem)
 
 
 def drake_plan_scene(problem):

@@ -15,6 +15,8 @@ from time import perf_counter as _clock
 import numpy as np
 
 from scenes import fcl_kernel as K
+from scenes.fcl_kernel_data import SCRATCH, float_field, int_field, pack
+from scenes.fcl_kernel_motion import WORK, motion_check
 from scenes.fcl_world import CollisionWorld
 
 
@@ -62,7 +64,7 @@ class CompiledWorld(CollisionWorld):
             "rows0": self._rows0, "R2": pairs(self._R2), "rho2": pairs(rho2),
             "tab_lo": self._tab_lo, "tab_inv": self._tab_inv, "tab_n": self._tab_n,
             "row_chain": self._reach_chain(), "pair_r": pairs(self._pair_r), "pair_self": pairs(self._pair_self),
-            "rows": self._world0, "d2": np.zeros(len(self._R2)), "scratch": np.zeros(K.SCRATCH),
+            "rows": self._world0, "d2": np.zeros(len(self._R2)), "scratch": np.zeros(SCRATCH),
             "lam_pair": np.zeros(len(self._R2)), "sph": np.zeros(3 * S),
             "link_end": self._link_end, "s_row": self._iab[0, :ne:n_obs], "ia": pairs(self._iab[0]),
             "ib": pairs(self._iab[1]), "pp": pairs(self._pp), "tab_j": self._tab_j, "tab_k": self._tab_k,
@@ -73,11 +75,11 @@ class CompiledWorld(CollisionWorld):
         fields.update(self._fine_cover())
         sizes = (len(self._rows0), len(self._world0), n_obs, len(self._R2), T, ne,
                  len(self._tab_cells) // T if T else 1, len(self._pp_part))
-        self._F, self._I, self._C = K.pack(fields, sizes)
-        self._krows = K.float_field(self._F, self._I, "rows").reshape(-1, 3)
-        self._kpairs = K.int_field(self._I, "pairs")
+        self._F, self._I, self._C = pack(fields, sizes)
+        self._krows = float_field(self._F, self._I, "rows").reshape(-1, 3)
+        self._kpairs = int_field(self._I, "pairs")
         self._todo = np.zeros(1024, np.bool_)  # the motion check's samples still to evaluate
-        self._ws = np.zeros(K.WORK, np.int64)  # and where it stands
+        self._ws = np.zeros(WORK, np.int64)  # and where it stands
         self._check = self._compiled_check
 
     def _obstacle_fields(self) -> dict:
@@ -165,7 +167,7 @@ class CompiledWorld(CollisionWorld):
         q1 = np.ascontiguousarray(q1, dtype=np.float64)
         try:
             while True:
-                code, count = K.motion_check(q0, q1, resolution_rad, F, I, C, self._todo, ws)
+                code, count = motion_check(q0, q1, resolution_rad, F, I, C, self._todo, ws)
                 if code == K.NEED_SPACE:
                     self._todo = np.zeros(2 * int(ws[2]) + 64, np.bool_)
                     ws[0] = 0

@@ -19,20 +19,18 @@ samples are evaluated in one call, the coarsest first, resumable where FCL must 
 The differential check (`python -m suite bench kernel`, `tests/scenes/test_fcl_compiled.py`)
 compares the answers with the numpy path's.
 
-Compiled once per machine into numba's disk cache (`cache_dir()`): a user-writable directory,
-written atomically by numba, so that worker processes starting together share it; where no
-directory is writable the kernels compile in memory. Nothing here needs a C compiler.
+Compiled once per machine into numba's disk cache (`scenes.fcl_kernel_data`); the motion check is
+`scenes.fcl_kernel_motion`.
 """
 
 from __future__ import annotations
 
 import logging
-import os
-import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
+
+from scenes.fcl_kernel_data import _CACHE, FLOAT_FIELDS, INT_FIELDS, N_SIZES, SCRATCH, _f, _i, _jit, pack
 
 log = logging.getLogger(__name__)
 
@@ -45,99 +43,6 @@ _APART_PAIR = 3
 #: Obstacle kinds, each with its exact point distance: an axis-aligned box, a box, a cylinder
 #: (axis z of its frame), a sphere.
 AABB, OBB, CYLINDER, SPHERE = 0, 1, 2, 3
-
-
-def cache_candidates() -> list[Path]:
-    """Where the kernels' cache may go, in order: NUMBA_CACHE_DIR if set, the user's cache
-    (XDG_CACHE_HOME or ~/.cache) under can-recycling-suite/numba, then the temporary directory."""
-    env = os.environ.get("NUMBA_CACHE_DIR")
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return [*([Path(env)] if env else []), Path(base) / "can-recycling-suite" / "numba",
-            Path(tempfile.gettempdir()) / f"can-recycling-suite-numba-{os.getuid()}"]
-
-
-def cache_dir(candidates: list[Path] | None = None) -> Path | None:
-    """The first writable directory of `candidates` (default `cache_candidates()`), created if
-    need be; None if none is writable (the kernels then compile in memory, in every process)."""
-    for d in cache_candidates() if candidates is None else candidates:
-        try:
-            d.mkdir(parents=True, exist_ok=True)
-            probe = tempfile.NamedTemporaryFile(dir=d, prefix=".probe", delete=True)
-            probe.close()
-            return d
-        except OSError:
-            continue
-    return None
-
-
-_CACHE = cache_dir()
-if _CACHE is not None:
-    os.environ.setdefault("NUMBA_CACHE_DIR", str(_CACHE))
-
-import numba  # noqa: E402  (after NUMBA_CACHE_DIR is set: numba reads it on import)
-
-if _CACHE is not None and numba.config.CACHE_DIR != str(_CACHE):
-    numba.config.CACHE_DIR = str(_CACHE)  # numba was imported before this module
-
-_jit = numba.njit(cache=_CACHE is not None, nogil=True, fastmath=False, error_model="numpy")
-
-
-#: The world's arrays packed into three buffers (one dispatch argument each: a numba call pays
-#: about 60 ns per argument, more than a state's sphere tier with 26 of them).
-FLOAT_FIELDS = ("Mc", "Ms", "M1", "rows0", "obs_ctr", "obs_half", "R2", "rho2", "tab_lo", "tab_inv", "tab_n",
-                "row_chain", "pair_r", "pair_self", "rows", "d2", "scratch", "lam_pair", "fine_rows0", "fine_out2",
-                "fine_in2", "obs_rot", "sph")
-INT_FIELDS = ("link_end", "s_row", "ia", "ib", "pp", "tab_j", "tab_k", "pair_b", "pair_counts", "pairs", "is_frame",
-              "pp_part", "pp_obs", "part_link", "fine_start", "obs_type")
-#: Header of the int buffer: sizes, then (start, length) of every float field, then of every int field.
-N_SIZES = 8  # R (robot rows), Rt (world rows), O, P, T, n_env, tab_width, n_pp
-HEADER = N_SIZES + 2 * (len(FLOAT_FIELDS) + len(INT_FIELDS))
-SCRATCH = 7 * 16 + 2 * 12 + 7 * 12  # LT, W, V, and W_k of every link (for the frame rows, on demand)
-
-
-def pack(fields: dict, sizes: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(F, I, C): every float field, every int field (after the header) and the table cells."""
-    fl = [np.ascontiguousarray(fields[k], np.float64).ravel() for k in FLOAT_FIELDS]
-    il = [np.ascontiguousarray(fields[k], np.int64).ravel() for k in INT_FIELDS]
-    F = np.concatenate(fl) if fl else np.zeros(0)
-    head = np.zeros(HEADER, np.int64)
-    head[:N_SIZES] = sizes
-    at = 0
-    for f, a in enumerate(fl):
-        head[N_SIZES + 2 * f], head[N_SIZES + 2 * f + 1] = at, len(a)
-        at += len(a)
-    at = HEADER
-    base = N_SIZES + 2 * len(FLOAT_FIELDS)
-    for f, a in enumerate(il):
-        head[base + 2 * f], head[base + 2 * f + 1] = at, len(a)
-        at += len(a)
-    I = np.concatenate([head, *il])
-    C = np.ascontiguousarray(fields["tab_cells"], np.uint8).ravel()
-    return F, I, C
-
-
-def float_field(F: np.ndarray, I: np.ndarray, name: str) -> np.ndarray:
-    """A view of float field `name` in F (for Python: the rows FCL places parts by)."""
-    f = FLOAT_FIELDS.index(name)
-    a, n = I[N_SIZES + 2 * f], I[N_SIZES + 2 * f + 1]
-    return F[a : a + n]
-
-
-def int_field(I: np.ndarray, name: str) -> np.ndarray:
-    f = N_SIZES + 2 * len(FLOAT_FIELDS) + 2 * INT_FIELDS.index(name)
-    return I[I[f] : I[f] + I[f + 1]]
-
-
-@_jit
-def _f(F, I, f):
-    a = I[N_SIZES + 2 * f]
-    return F[a : a + I[N_SIZES + 2 * f + 1]]
-
-
-@_jit
-def _i(I, f):
-    k = N_SIZES + 2 * len(FLOAT_FIELDS) + 2 * f
-    return I[I[k] : I[k] + I[k + 1]]
 
 
 @_jit
@@ -374,156 +279,6 @@ def state_decide(q, F, I, C):
 
 
 @_jit
-def _reach(F, I, lam_pair, n):
-    """How many sample steps a state's distances prove free on either side: the floor of the least
-    (distance bound / lambda) over the counting pairs, minus 1e-9, as the numpy path computes it,
-    capped at n + 1 (a reach beyond the motion proves nothing more). A pair whose squared distance
-    shows it cannot lower the least so far skips its square root."""
-    d2, pair_r, pair_counts = _f(F, I, 15), _f(F, I, 12), _i(I, 8)
-    best = n + 1.0
-    for p in range(len(d2)):
-        lp = lam_pair[p]
-        if pair_counts[p] and lp > 0.0:
-            t = best * lp + pair_r[p]
-            if t > 0.0 and d2[p] >= t * t:
-                continue  # sqrt(d2) - r >= best * lambda: not below the least
-            v = (np.sqrt(d2[p]) - pair_r[p]) / lp
-            if v < best:
-                best = v
-    return np.int64(np.floor(best - 1e-9))
-
-
-#: Layout of a motion check's work array (int64): phase, position, n, states evaluated, head
-#: length, the head's sample indices, then the reach of q0 and of each head sample.
-WS_HEAD, WS_REACH = 5, 5 + 8
-WORK = WS_REACH + 9
-_START, _HEAD, _REST = 0, 1, 2
-
-
-@_jit
-def _head_order(n, ws):
-    """The motion's first samples, as `scenes.fcl_motion.check_order(n)[:8]`: the end n, then
-    1..n-1 coarsest first (by the power of two dividing them; ascending among equals)."""
-    ws[WS_HEAD] = n
-    k = 1
-    level = 0
-    while (1 << (level + 1)) <= n - 1:
-        level += 1
-    while level >= 0 and k < 8:
-        step = 1 << level
-        i = step
-        while i < n and k < 8:
-            if (i >> level) & 1:  # exactly `level` factors of two
-                ws[WS_HEAD + k] = i
-                k += 1
-            i += 2 * step
-        level -= 1
-    ws[4] = k
-
-
-@_jit
-def motion_check(q0, q1, resolution, F, I, C, todo, ws):
-    """The planners' motion check of q0 -> q1 (samples q0 + (i / n)(q1 - q0), i = 1..n,
-    n = max(1, ceil(max_j |q1_j - q0_j| / resolution)); q0 taken as free), decided as
-    `MotionChecks._motion_samples_free` does: q0 and the head (the end and the coarsest samples)
-    first, their distance bounds proving neighbours free, the joint tables looked up at every
-    sample, then the samples nothing proved, in order.
-
-    Resumable: it returns at the first sample it leaves UNDECIDED (its rows and pairs in F and I,
-    the pair count returned) and, called again with the same `ws`, continues after it; set
-    ws[0] = 0 to start a motion. Returns (FREE: the motion is free, COLLIDES, or UNDECIDED,
-    pairs); ws[3] counts the states evaluated."""
-    P, Rt = I[3], I[1]
-    lam_pair = _f(F, I, 17)
-    q = np.empty(7)
-    d = np.empty(7)
-    for j in range(7):
-        d[j] = q1[j] - q0[j]
-    if ws[0] == _START:
-        ws[3] = 0
-        big = 0.0
-        for j in range(7):
-            if abs(d[j]) > big:
-                big = abs(d[j])
-        n = np.int64(np.ceil(big / resolution))
-        if n < 1:
-            n = 1
-        ws[2] = n
-        if n + 1 > len(todo):
-            return NEED_SPACE, 0  # the caller gives a `todo` of at least ws[2] + 1 and calls again
-        ws[1], ws[3] = 0, 1
-        _head_order(n, ws)
-        ia, pair_b = _i(I, 2), _i(I, 7)
-        row_chain, pair_self = _f(F, I, 11), _f(F, I, 13)
-        lam = np.empty(Rt)
-        for r in range(Rt):
-            acc = 0.0
-            for j in range(7):
-                acc += row_chain[7 * r + j] * abs(d[j] / n)
-            lam[r] = acc
-        for p in range(P):
-            lam_pair[p] = lam[ia[p]] + lam[pair_b[p]] * pair_self[p]
-        fk_rows(q0, F, I)  # q0: only its distances are wanted
-        _d2_all(F, I)
-        ws[WS_REACH] = _reach(F, I, lam_pair, n)
-        ws[0] = _HEAD
-    n, n_head = ws[2], ws[4]
-    if ws[0] == _HEAD:
-        for h in range(ws[1], n_head):
-            i = ws[WS_HEAD + h]
-            for j in range(7):
-                q[j] = q0[j] + (i / n) * d[j]
-            ws[3] += 1
-            code, count = state_decide(q, F, I, C)
-            if code == COLLIDES:
-                return COLLIDES, 0
-            ws[WS_REACH + 1 + h] = _reach(F, I, lam_pair, n)
-            if code == UNDECIDED:
-                ws[1] = h + 1
-                return UNDECIDED, count
-        if n_head == n:
-            return FREE, 0
-        for m in range(n + 1):
-            todo[m] = True
-        for h in range(n_head + 1):
-            i = 0 if h == 0 else ws[WS_HEAD + h - 1]
-            k = ws[WS_REACH + h]
-            if k >= 1:
-                lo = i - k if i - k > 0 else 0
-                hi = i + k + 1 if i + k + 1 < n + 1 else n + 1
-                for m in range(lo, hi):
-                    todo[m] = False
-        tab_j = _i(I, 5)
-        if len(tab_j):
-            for m in range(1, n + 1):
-                unknown = False
-                for t in range(len(tab_j)):
-                    j = tab_j[t]
-                    c = _table_cell(F, I, C, t, q0[j] + (m / n) * d[j])
-                    if c == _TOUCHING:
-                        return COLLIDES, 0
-                    if c == _UNKNOWN:
-                        unknown = True
-                if unknown:
-                    todo[m] = True
-        todo[0] = False
-        for h in range(n_head):
-            todo[ws[WS_HEAD + h]] = False  # evaluated already
-        ws[0], ws[1] = _REST, 1
-    for m in range(ws[1], n + 1):
-        if not todo[m]:
-            continue
-        for j in range(7):
-            q[j] = q0[j] + (m / n) * d[j]
-        ws[3] += 1
-        code, count = state_decide(q, F, I, C)
-        if code != FREE:
-            ws[1] = m + 1
-            return code, count
-    return FREE, 0
-
-
-@_jit
 def batch_decide(Q, stop_at_first, F, I, C):
     """Decisions (M,) of a batch of states; with stop_at_first, the states after the first
     COLLIDES are left FREE (unchecked). UNDECIDED states are FCL's."""
@@ -558,6 +313,8 @@ def compile_kernels() -> float:
     q = np.zeros(7)
     state_decide(q, F, I, C)
     batch_decide(np.zeros((1, 7)), True, F, I, C)
+    from scenes.fcl_kernel_motion import WORK, motion_check
+
     motion_check(q, np.ones(7), 0.5, F, I, C, np.zeros(4, np.bool_), np.zeros(WORK, np.int64))
     _WARM["s"] = time.perf_counter() - t
     log.debug("fcl kernels ready in %.2f s (cache %s)", _WARM["s"], _CACHE)

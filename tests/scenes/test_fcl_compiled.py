@@ -98,7 +98,7 @@ def test_the_checker_switch(monkeypatch):
 
 
 def test_no_writable_cache_directory_means_compiling_in_memory(tmp_path):
-    from scenes.fcl_kernel import cache_dir
+    from scenes.fcl_kernel_data import cache_dir
 
     blocked = tmp_path / "file"
     blocked.write_text("")  # a file where a directory should be: not creatable
