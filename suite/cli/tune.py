@@ -156,6 +156,8 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
           + (f"; under 50% on {', '.join(weak)} where another candidate does better" if weak else ""))
     print(f"pooled over problems (the rule before recycle-v3) it would be: {json.dumps(results[pooled].settings, default=str)}")
     if args.write:
+        from planners.worlds import checker
+
         data = {
             "planner": args.planner,
             "settings": results[chosen].settings,
@@ -167,6 +169,7 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
             "dataset": {"name": ds.name, "hash": ds.hash, "split": "tune", "problems": len(problems),
                         "per_family": args.per_family, "non_trivial_only": True},
             "time_limit_s": args.time_limit_s,
+            "checker": checker(),  # what the candidates' python-fcl checks ran in (planners.worlds)
             "date_utc": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d"),
             "weak_families": weak,
             "table": rows,
