@@ -66,8 +66,12 @@ def plot_time_attribution(records: Sequence[dict], *, planners: Sequence[str], p
     from matplotlib.patches import Patch
 
     handles = [Patch(color=colors[p], label=p) for p in planners]
+    checkers = sorted({str(r["checker"]) for r in warm if r.get("checker")})  # what python-fcl's decisions ran in
+    labels = {e: ENGINE_STYLE.get(e, ("..", e))[1] for e in engines_seen}
+    if "python-fcl" in labels and checkers:
+        labels["python-fcl"] = f"python-fcl queries, {' and '.join(checkers)} (clocked)"
     handles += [Patch(facecolor="grey", hatch=ENGINE_STYLE.get(e, ("..", e))[0], edgecolor="white",
-                      label=ENGINE_STYLE.get(e, ("..", e))[1]) for e in engines_seen]
+                      label=labels[e]) for e in engines_seen]
     handles.append(Patch(facecolor="grey", alpha=0.3, label="the rest (planner code, Python, solver)"))
     ax.set_xticks(x)
     ax.set_xticklabels(families)
