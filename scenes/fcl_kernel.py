@@ -30,7 +30,57 @@ import time
 
 import numpy as np
 
-from scenes.fcl_kernel_data import _CACHE, FLOAT_FIELDS, INT_FIELDS, N_SIZES, SCRATCH, _f, _i, _jit, pack
+from scenes.fcl_kernel_data import (
+    F_D2,
+    F_FINE_IN2,
+    F_FINE_OUT2,
+    F_FINE_ROWS0,
+    F_M1,
+    F_MC,
+    F_MS,
+    F_OBS_CTR,
+    F_OBS_HALF,
+    F_OBS_ROT,
+    F_R2,
+    F_RHO2,
+    F_ROWS,
+    F_ROWS0,
+    F_SCRATCH,
+    F_SPH,
+    F_TAB_INV,
+    F_TAB_LO,
+    F_TAB_N,
+    FLOAT_FIELDS,
+    I_FINE_START,
+    I_IA,
+    I_IB,
+    I_IS_FRAME,
+    I_LINK_END,
+    I_OBS_TYPE,
+    I_PAIRS,
+    I_PART_LINK,
+    I_PP,
+    I_PP_OBS,
+    I_PP_PART,
+    I_S_ROW,
+    I_TAB_J,
+    I_TAB_K,
+    INT_FIELDS,
+    pack,
+    S_NENV,
+    S_NPP,
+    S_O,
+    S_TABW,
+    SCR_LT,
+    SCR_V,
+    SCR_W,
+    SCR_WALL,
+    SCRATCH,
+    _CACHE,
+    _f,
+    _i,
+    _jit,
+)
 
 log = logging.getLogger(__name__)
 
@@ -54,13 +104,13 @@ def fk_rows(q, F, I):
     Joint k's local transform (transposed: rows multiply from the left) is
     Mc[k] cos q_k + Ms[k] sin q_k + M1[k], the three non-zero columns of the numpy path's M.
     Each link's frame to the world, W_k = LT_k ... LT_1 (x y z columns), then maps its rows."""
-    Mc, Ms, M1 = _f(F, I, 0), _f(F, I, 1), _f(F, I, 2)
-    rows0, rows, scratch = _f(F, I, 3), _f(F, I, 14), _f(F, I, 16)
-    link_end, is_frame = _i(I, 0), _i(I, 10)
-    LT = scratch[:112]
-    W = scratch[112:124]
-    V = scratch[124:136]
-    Wall = scratch[136:220]
+    Mc, Ms, M1 = _f(F, I, F_MC), _f(F, I, F_MS), _f(F, I, F_M1)
+    rows0, rows, scratch = _f(F, I, F_ROWS0), _f(F, I, F_ROWS), _f(F, I, F_SCRATCH)
+    link_end, is_frame = _i(I, I_LINK_END), _i(I, I_IS_FRAME)
+    LT = scratch[SCR_LT:SCR_W]
+    W = scratch[SCR_W:SCR_V]
+    V = scratch[SCR_V:SCR_WALL]
+    Wall = scratch[SCR_WALL:SCRATCH]
     for k in range(7):
         c, s = np.cos(q[k]), np.sin(q[k])
         for e in range(16):
@@ -95,9 +145,9 @@ def fk_rows(q, F, I):
 @_jit
 def fk_frames(F, I):
     """The parts' frame rows of the configuration `fk_rows` last mapped (for FCL's placements)."""
-    rows0, rows, scratch = _f(F, I, 3), _f(F, I, 14), _f(F, I, 16)
-    link_end, is_frame = _i(I, 0), _i(I, 10)
-    Wall = scratch[136:220]
+    rows0, rows, scratch = _f(F, I, F_ROWS0), _f(F, I, F_ROWS), _f(F, I, F_SCRATCH)
+    link_end, is_frame = _i(I, I_LINK_END), _i(I, I_IS_FRAME)
+    Wall = scratch[SCR_WALL:SCRATCH]
     for k in range(1, 8):
         lo = link_end[k + 1] if k < 7 else 0
         w = 12 * (k - 1)
@@ -145,14 +195,14 @@ def _point_d2(O, ctr, half, rot, t, o, x, y, z):
 def _d2_all(F, I):
     """Squared distance of every sphere pair into the d2 field: each scene sphere's centre to each
     obstacle (exact, by its kind: `_point_d2`), obstacle-major, then the self pairs' centres."""
-    rows, d2, sph = _f(F, I, 14), _f(F, I, 15), _f(F, I, 22)
-    s_row, ia, ib = _i(I, 1), _i(I, 2), _i(I, 3)
-    O, n_env = I[2], I[5]
+    rows, d2, sph = _f(F, I, F_ROWS), _f(F, I, F_D2), _f(F, I, F_SPH)
+    s_row, ia, ib = _i(I, I_S_ROW), _i(I, I_IA), _i(I, I_IB)
+    O, n_env = I[S_O], I[S_NENV]
     S = len(s_row)
     for s in range(S):  # the scene spheres' centres by coordinate
         r = 3 * s_row[s]
         sph[s], sph[S + s], sph[2 * S + s] = rows[r], rows[r + 1], rows[r + 2]
-    ctr, half, rot, kind = _f(F, I, 4), _f(F, I, 5), _f(F, I, 21), _i(I, 15)
+    ctr, half, rot, kind = _f(F, I, F_OBS_CTR), _f(F, I, F_OBS_HALF), _f(F, I, F_OBS_ROT), _i(I, I_OBS_TYPE)
     for o in range(O):
         t = kind[o]
         cx, cy, cz = ctr[o], ctr[O + o], ctr[2 * O + o]
@@ -206,9 +256,9 @@ def _d2_all(F, I):
 
 @_jit
 def _table_cell(F, I, C, t, qj):
-    x = (qj - _f(F, I, 8)[t]) * _f(F, I, 9)[t]
-    if 0.0 <= x < _f(F, I, 10)[t]:
-        return C[t * I[6] + int(x)]
+    x = (qj - _f(F, I, F_TAB_LO)[t]) * _f(F, I, F_TAB_INV)[t]
+    if 0.0 <= x < _f(F, I, F_TAB_N)[t]:
+        return C[t * I[S_TABW] + int(x)]
     return _UNKNOWN
 
 
@@ -217,9 +267,9 @@ def _fine_pair(F, I, part, o):
     """A scene pair the coarse spheres left open, tried with the part's fine spheres (the same
     kind of cover, spaced closer): APART if none reaches the obstacle, COLLIDES if a fine inner
     ball meets it, else UNDECIDED (FCL's)."""
-    rows0f, out2, in2, Wall = _f(F, I, 18), _f(F, I, 19), _f(F, I, 20), _f(F, I, 16)[136:220]
-    part_link, fine_start = _i(I, 13), _i(I, 14)
-    O, ctr, half, rot, t = I[2], _f(F, I, 4), _f(F, I, 5), _f(F, I, 21), _i(I, 15)[o]
+    rows0f, out2, in2, Wall = _f(F, I, F_FINE_ROWS0), _f(F, I, F_FINE_OUT2), _f(F, I, F_FINE_IN2), _f(F, I, F_SCRATCH)[SCR_WALL:SCRATCH]
+    part_link, fine_start = _i(I, I_PART_LINK), _i(I, I_FINE_START)
+    O, ctr, half, rot, t = I[S_O], _f(F, I, F_OBS_CTR), _f(F, I, F_OBS_HALF), _f(F, I, F_OBS_ROT), _i(I, I_OBS_TYPE)[o]
     w = 12 * (part_link[part] - 1)
     hit = False
     for s in range(fine_start[part], fine_start[part + 1]):
@@ -240,9 +290,9 @@ def state_decide(q, F, I, C):
     """One state: FREE, COLLIDES, or UNDECIDED with its part-level pairs for FCL in the pairs
     field [:count]. Returns (decision, count); the rows field holds its world rows and d2 every
     sphere pair's squared distance (all of them unless an early COLLIDES)."""
-    n_pp = I[7]
+    n_pp = I[S_NPP]
     marks = np.zeros(n_pp, np.bool_)
-    tab_j, tab_k = _i(I, 5), _i(I, 6)
+    tab_j, tab_k = _i(I, I_TAB_J), _i(I, I_TAB_K)
     for t in range(len(tab_j)):
         c = _table_cell(F, I, C, t, q[tab_j[t]])
         if c == _TOUCHING:
@@ -251,13 +301,13 @@ def state_decide(q, F, I, C):
             marks[tab_k[t]] = True
     fk_rows(q, F, I)
     _d2_all(F, I)
-    d2, R2, rho2, pp = _f(F, I, 15), _f(F, I, 6), _f(F, I, 7), _i(I, 4)
+    d2, R2, rho2, pp = _f(F, I, F_D2), _f(F, I, F_R2), _f(F, I, F_RHO2), _i(I, I_PP)
     for p in range(len(d2)):
         if d2[p] <= R2[p]:
             if d2[p] < rho2[p]:
                 return COLLIDES, 0
             marks[pp[p]] = True
-    pp_part, pp_obs, fine_start = _i(I, 11), _i(I, 12), _i(I, 14)
+    pp_part, pp_obs, fine_start = _i(I, I_PP_PART), _i(I, I_PP_OBS), _i(I, I_FINE_START)
     for k in range(n_pp):  # scene pairs: the part's fine spheres may decide them
         o = pp_obs[k]
         if marks[k] and o >= 0 and fine_start[pp_part[k] + 1] > fine_start[pp_part[k]]:
@@ -266,7 +316,7 @@ def state_decide(q, F, I, C):
                 return COLLIDES, 0
             if r == _APART_PAIR:
                 marks[k] = False
-    pairs = _i(I, 9)
+    pairs = _i(I, I_PAIRS)
     count = 0
     for k in range(n_pp):
         if marks[k]:

@@ -57,10 +57,21 @@ FLOAT_FIELDS = ("Mc", "Ms", "M1", "rows0", "obs_ctr", "obs_half", "R2", "rho2", 
                 "fine_in2", "obs_rot", "sph")
 INT_FIELDS = ("link_end", "s_row", "ia", "ib", "pp", "tab_j", "tab_k", "pair_b", "pair_counts", "pairs", "is_frame",
               "pp_part", "pp_obs", "part_link", "fine_start", "obs_type")
+#: Each field's place, in the order above: the kernels read `_f(F, I, F_ROWS)`, never a bare number.
+(F_MC, F_MS, F_M1, F_ROWS0, F_OBS_CTR, F_OBS_HALF, F_R2, F_RHO2, F_TAB_LO, F_TAB_INV, F_TAB_N, F_ROW_CHAIN,
+    F_PAIR_R, F_PAIR_SELF, F_ROWS, F_D2, F_SCRATCH, F_LAM_PAIR, F_FINE_ROWS0, F_FINE_OUT2, F_FINE_IN2,
+    F_OBS_ROT, F_SPH) = range(len(FLOAT_FIELDS))
+(I_LINK_END, I_S_ROW, I_IA, I_IB, I_PP, I_TAB_J, I_TAB_K, I_PAIR_B, I_PAIR_COUNTS, I_PAIRS, I_IS_FRAME,
+    I_PP_PART, I_PP_OBS, I_PART_LINK, I_FINE_START, I_OBS_TYPE) = range(len(INT_FIELDS))
 #: Header of the int buffer: sizes, then (start, length) of every float field, then of every int field.
-N_SIZES = 8  # R (robot rows), Rt (world rows), O, P, T, n_env, tab_width, n_pp
+N_SIZES = 8
+#: The sizes' places: robot rows, world rows, obstacles, sphere pairs, joint tables, scene pairs,
+#: a table's width (cells + 1), part-level pairs.
+(S_R, S_RT, S_O, S_P, S_T, S_NENV, S_TABW, S_NPP) = range(N_SIZES)
 HEADER = N_SIZES + 2 * (len(FLOAT_FIELDS) + len(INT_FIELDS))
-SCRATCH = 7 * 16 + 2 * 12 + 7 * 12  # LT, W, V, and W_k of every link (for the frame rows, on demand)
+#: The scratch field: the joint transforms LT, the chain's W and V, and W_k of every link (kept
+#: for the frame rows, which are mapped only when FCL needs them).
+SCR_LT, SCR_W, SCR_V, SCR_WALL, SCRATCH = 0, 112, 124, 136, 220
 
 
 def pack(fields: dict, sizes: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -18,7 +18,22 @@ from scenes.fcl_kernel import (
     fk_rows,
     state_decide,
 )
-from scenes.fcl_kernel_data import _f, _i, _jit
+from scenes.fcl_kernel_data import (
+    F_D2,
+    F_LAM_PAIR,
+    F_PAIR_R,
+    F_PAIR_SELF,
+    F_ROW_CHAIN,
+    I_IA,
+    I_PAIR_B,
+    I_PAIR_COUNTS,
+    I_TAB_J,
+    S_P,
+    S_RT,
+    _f,
+    _i,
+    _jit,
+)
 
 
 @_jit
@@ -27,7 +42,7 @@ def _reach(F, I, lam_pair, n):
     (distance bound / lambda) over the counting pairs, minus 1e-9, as the numpy path computes it,
     capped at n + 1 (a reach beyond the motion proves nothing more). A pair whose squared distance
     shows it cannot lower the least so far skips its square root."""
-    d2, pair_r, pair_counts = _f(F, I, 15), _f(F, I, 12), _i(I, 8)
+    d2, pair_r, pair_counts = _f(F, I, F_D2), _f(F, I, F_PAIR_R), _i(I, I_PAIR_COUNTS)
     best = n + 1.0
     for p in range(len(d2)):
         lp = lam_pair[p]
@@ -81,8 +96,8 @@ def motion_check(q0, q1, resolution, F, I, C, todo, ws):
     the pair count returned) and, called again with the same `ws`, continues after it; set
     ws[0] = 0 to start a motion. Returns (FREE: the motion is free, COLLIDES, or UNDECIDED,
     pairs); ws[3] counts the states evaluated."""
-    P, Rt = I[3], I[1]
-    lam_pair = _f(F, I, 17)
+    P, Rt = I[S_P], I[S_RT]
+    lam_pair = _f(F, I, F_LAM_PAIR)
     q = np.empty(7)
     d = np.empty(7)
     for j in range(7):
@@ -101,8 +116,8 @@ def motion_check(q0, q1, resolution, F, I, C, todo, ws):
             return NEED_SPACE, 0  # the caller gives a `todo` of at least ws[2] + 1 and calls again
         ws[1], ws[3] = 0, 1
         _head_order(n, ws)
-        ia, pair_b = _i(I, 2), _i(I, 7)
-        row_chain, pair_self = _f(F, I, 11), _f(F, I, 13)
+        ia, pair_b = _i(I, I_IA), _i(I, I_PAIR_B)
+        row_chain, pair_self = _f(F, I, F_ROW_CHAIN), _f(F, I, F_PAIR_SELF)
         lam = np.empty(Rt)
         for r in range(Rt):
             acc = 0.0
@@ -141,7 +156,7 @@ def motion_check(q0, q1, resolution, F, I, C, todo, ws):
                 hi = i + k + 1 if i + k + 1 < n + 1 else n + 1
                 for m in range(lo, hi):
                     todo[m] = False
-        tab_j = _i(I, 5)
+        tab_j = _i(I, I_TAB_J)
         if len(tab_j):
             for m in range(1, n + 1):
                 unknown = False
