@@ -30,18 +30,14 @@ def _c(a, dtype) -> np.ndarray:
 
 
 class CompiledWorld(CollisionWorld):
-    """`CollisionWorld` (same arguments) deciding with the compiled kernels.
-
-    Attributes:
-        compile_s: seconds this process spent compiling (or loading) the kernels when this world
-            was built (0 for every world after the first): set-up, never planning time.
-    """
+    """`CollisionWorld` (same arguments) deciding with the compiled kernels; building the first one
+    in a process compiles (or loads) them: set-up, never planning time."""
 
     engine = "compiled"
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
-        self.compile_s = K.compile_kernels()
+        K.compile_kernels()
         M = self._M_full
         n_obs, ne, T = len(self._obs_c), self._n_env, len(self._tab_k)
         is_frame = np.zeros(len(self._rows0), np.int64)  # the parts' pose rows: FCL's alone
@@ -124,22 +120,10 @@ class CompiledWorld(CollisionWorld):
                 "pp_part": np.array(self._pp_part), "pp_obs": np.array(pp_obs),
                 "part_link": np.array([p.link for p in self.parts]), "fine_start": np.array(start)}
 
-    def _decide(self, q: np.ndarray) -> tuple[int, int]:
-        """The kernel's decision of one state (FREE, COLLIDES, UNDECIDED) and how many pairs it
-        leaves to FCL (in self._kpairs; its rows in self._krows)."""
-        return K.state_decide(q, self._F, self._I, self._C)
-
     def _compiled_check(self, q) -> bool:
+        """One state (`is_free`'s check): the kernel's decision, and FCL's for the pairs it leaves
+        undecided (placed by the rows the kernel left in self._krows)."""
         code, count = K.state_decide(np.ascontiguousarray(q, dtype=np.float64), self._F, self._I, self._C)
-        if code == K.FREE:
-            return True
-        if code == K.COLLIDES:
-            return False
-        return not self._exact_pairs(self._krows, self._kpairs[:count].tolist())
-
-    def _undecided_free(self, q: np.ndarray) -> bool:
-        """FCL's answer for a state the kernel left undecided."""
-        code, count = self._decide(q)
         if code != K.UNDECIDED:
             return code == K.FREE
         return not self._exact_pairs(self._krows, self._kpairs[:count].tolist())
@@ -149,7 +133,7 @@ class CompiledWorld(CollisionWorld):
         codes = K.batch_decide(Q, bool(stop_at_first), self._F, self._I, self._C)
         out = np.ones(len(Q), bool)
         for m in np.flatnonzero(codes != K.FREE).tolist():
-            bad = codes[m] == K.COLLIDES or not self._undecided_free(Q[m])
+            bad = codes[m] == K.COLLIDES or not self._compiled_check(Q[m])
             if bad:
                 out[m] = False
                 if stop_at_first:
