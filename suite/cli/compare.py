@@ -294,8 +294,10 @@ def _shared_steps(trials, steps, *, pose: dict) -> dict:
         for p in build_problems(scene, [truth_grasp(scene, c) for c in scene.cans], time_limit_s=1.0, seed=scene.seed,
                                 **pose):
             k = (key, p.can_id, p.kind)
-            if p.pre_status is None and k not in planned and k not in steps and problem_id(p) in stored_id:
-                shared[k] = stored_id[problem_id(p)]
+            if p.pre_status is None and k not in planned and k not in steps:
+                pid = stored_id.get(problem_id(p))
+                if pid is not None:
+                    shared[k] = pid
     return shared
 
 

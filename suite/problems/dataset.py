@@ -300,7 +300,7 @@ class ManifestFields:
 
 
 def identity_rule(manifest: dict[str, Any]) -> str:
-    """The identity rule of a dataset's problem_ids, from its manifest."""
+    """The identity rule of the problem_ids of a dataset or a run, from its manifest (absent: `round9`)."""
     return manifest.get("identity_rule", LEGACY_RULE)
 
 

@@ -60,12 +60,9 @@ class RecordedProblems:
     def _identity_rule(self) -> str:
         """The rule the records' problem_ids were made with: the dataset's, else the run manifest's
         (a run written before rules had names: `round9`)."""
-        from scenes.identity_rule import LEGACY_RULE
         from suite.problems.dataset import identity_rule
 
-        if self._dataset is not None:
-            return identity_rule(self._dataset.manifest)
-        return self.manifest.get("identity_rule", LEGACY_RULE)
+        return identity_rule(self._dataset.manifest if self._dataset is not None else self.manifest)
 
     def reference(self, rec: dict[str, Any], field: str) -> float | None:
         """A reference figure of the record's problem (`reference_length_rad`, ...): the record's own,
