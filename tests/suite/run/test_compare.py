@@ -92,14 +92,16 @@ def test_resume_after_kill_loses_and_duplicates_nothing(tiny_run, tmp_path):
                             cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
     trials = out / "trials.jsonl"
     deadline = time.monotonic() + DEADLINE_S
-    while not (trials.exists() and len(trials.read_text().splitlines()) >= 3):
-        assert proc.poll() is None, ("the run ended before 3 records", proc.communicate())
+    # a fast machine may write all 10 records before the kill lands (or before the poll sees 3):
+    # the resume below must then add nothing, which it checks the same way
+    while not (trials.exists() and len(trials.read_text().splitlines()) >= 3) and proc.poll() is None:
         assert time.monotonic() < deadline, "no 3 records"
         time.sleep(0.1)
-    os.killpg(proc.pid, signal.SIGKILL)
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     n_before = len(trials.read_text().splitlines())
-    assert 3 <= n_before < 10
+    assert 3 <= n_before <= 10
     with open(trials, "a") as f:
         f.write('{"trial_id": "torn')  # a line cut short by the kill
     compare(*TINY, "--jobs", "2", "--out", str(out), "--resume")

@@ -169,12 +169,14 @@ def test_interrupted_execute_writes_nothing(tmp_path):
     out = tmp_path / "exec"
     err_path = tmp_path / "stderr.txt"
     with open(err_path, "w") as err_file:
-        proc = subprocess.Popen([sys.executable, "-m", "suite", "execute", "--planner", "rrt", "--variant", "open",
-                                 "--cans", "1", "--seed", "1", "--no-replay", "--out", str(out)], cwd=ROOT,
-                                env=_env(), stdout=subprocess.DEVNULL, stderr=err_file, text=True,
-                                start_new_session=True)
-    # arguments checked, the output directory made, the scene built: planning and execution start
-    _wait_until(lambda: "planning and executing" in err_path.read_text(), proc, "'planning and executing' line")
+        # the `stalling` fixture planner waits until it is killed: planning is under way when the
+        # signal comes, however fast the machine (a real planner may finish first: that raced)
+        proc = subprocess.Popen([sys.executable, "-m", "suite", "execute", "--planner", "stalling", "--variant",
+                                 "open", "--cans", "1", "--seed", "1", "--no-replay", "--out", str(out)], cwd=ROOT,
+                                env=dict(_env(), SUITE_TEST_MARKER_DIR=str(tmp_path)), stdout=subprocess.DEVNULL,
+                                stderr=err_file, text=True, start_new_session=True)
+    # arguments checked, the output directory made, the scene built: planning has started
+    _wait_until(lambda: (tmp_path / "planning").exists(), proc, "the planner's first plan call")
     os.killpg(proc.pid, signal.SIGTERM)
     proc.wait(timeout=DEADLINE_S)
     err = err_path.read_text()
