@@ -4,7 +4,8 @@ The state space is the arm's 7 joints (RealVectorStateSpace with the joint limit
 motions are checked by the problem's python-fcl world (`planners.worlds.planning_world`): a state by
 `is_free`, a straight motion by `motion_samples_free` over samples at most `resolution_rad` apart
 in every joint: the end state and coarse samples first so that a blocked motion is rejected after
-few checks, then only the samples their distance bounds do not prove free. `OmplProblem` creates every OMPL object of one solve
+few checks, then only the samples their distance bounds do not prove free. With the `certified`
+motion check a motion must also be proved free between its samples (`BatchMotionValidator`). `OmplProblem` creates every OMPL object of one solve
 and releases them in dependency order.
 
 Randomness: OMPL draws every RNG's seed from one process-global seed generator. A trial restarts
@@ -18,6 +19,7 @@ simplifier has its own RNG.)
 
 from __future__ import annotations
 
+import time
 
 import numpy as np
 from ompl import base as ob
@@ -73,19 +75,42 @@ class BatchMotionValidator(ob.MotionValidator):
     batched python-fcl queries, samples proved free by their neighbours' distances skipped)
     instead of one callback per state. The answer is that of checking every sample.
 
-    The start state is taken as valid (as OMPL's DiscreteMotionValidator does).
+    With `certify`, a motion whose samples are free must also be proved free along its whole
+    length by the exact segment check (`scenes.fcl_certify`, the judge's certifier on the same
+    world and pairs); an `unproved` segment counts as blocked. The start state is taken as valid
+    (as OMPL's DiscreteMotionValidator does).
+
+    Attributes:
+        motions: motions checked; certified_calls, certify_s: exact segment checks made and their
+            seconds (0 without `certify`).
     """
 
-    def __init__(self, si: ob.SpaceInformation, world, resolution_rad: float) -> None:
+    def __init__(self, si: ob.SpaceInformation, world, resolution_rad: float, *, certify: bool = False) -> None:
         super().__init__(si)
         self.world = world
         self.resolution_rad = resolution_rad
+        self.certify = certify
         self.motions = 0
+        self.certified_calls = 0
+        self.certify_s = 0.0
+
+    def motion_free(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether the straight motion a -> b passes this validator's check."""
+        if not self.world.motion_samples_free(a, b, resolution_rad=self.resolution_rad):
+            return False
+        if not self.certify:
+            return True
+        from scenes.fcl_certify import CERTIFIED, certifier
+
+        t0 = time.perf_counter()
+        verdict = certifier(self.world).certify(np.stack([a, b])).verdict
+        self.certified_calls += 1
+        self.certify_s += time.perf_counter() - t0
+        return verdict == CERTIFIED
 
     def checkMotion(self, s1, s2) -> bool:  # OMPL's name
         self.motions += 1
-        return self.world.motion_samples_free(np.array(s1[0:DOF]), np.array(s2[0:DOF]),
-                                              resolution_rad=self.resolution_rad)
+        return self.motion_free(np.array(s1[0:DOF]), np.array(s2[0:DOF]))
 
 
 # --- the OMPL objects of one solve -----------------------------------------------------------------
@@ -105,7 +130,7 @@ class OmplProblem:
     """
 
     def __init__(self, world, q_start: np.ndarray, q_goal: np.ndarray, *, resolution_rad: float,
-                 optimizing: bool) -> None:
+                 optimizing: bool, certify: bool = False) -> None:
         lo, hi = world.robot.lower_rad, world.robot.upper_rad
         self.space = ob.RealVectorStateSpace(DOF)
         self.bounds = ob.RealVectorBounds(DOF)
@@ -115,7 +140,7 @@ class OmplProblem:
         self.space.setBounds(self.bounds)
         self.si = ob.SpaceInformation(self.space)
         self.si.setStateValidityChecker(lambda s: world.is_free(np.array(s[0:DOF])))
-        self.validator = BatchMotionValidator(self.si, world, resolution_rad)
+        self.validator = BatchMotionValidator(self.si, world, resolution_rad, certify=certify)
         self.si.setMotionValidator(self.validator)
         self.si.setup()
         self.start, self.goal = self.si.allocState(), self.si.allocState()  # freed by their owners when released

@@ -37,6 +37,9 @@ from scenes.errors import SuiteError
 log = logging.getLogger(__name__)
 
 SIMPLIFIERS = ("rope", "full", "rope+full")
+#: How a motion is checked while planning and simplifying: "samples" (the field's rule: states at
+#: most `resolution_rad` apart), "certified" (those samples, then the exact segment check).
+MOTION_CHECKS = ("samples", "certified")
 
 
 # --- configuration ---------------------------------------------------------------------------------
@@ -66,6 +69,10 @@ class OmplConfig:
             this between consecutive waypoints; otherwise the simplified path's waypoints.
         time_limit_s: the budget of planning + simplification (s); None for the problem's
             `time_limit_s`.
+        motion_check: "samples" (default, the field's rule as in OMPL and MoveIt: a motion is free
+            if its samples `resolution_rad` apart are) or "certified" (its samples are free and
+            the exact segment check of `scenes.fcl_certify` proves the whole motion free; an
+            unproved motion counts as blocked). The judge applies the same certifier afterwards.
         verbose: let OMPL's informational log messages through.
     """
 
@@ -77,6 +84,7 @@ class OmplConfig:
     validate_resolution_rad: float | None = 0.01
     interpolate_rad: float | None = None
     time_limit_s: float | None = None
+    motion_check: str = "samples"
     verbose: bool = False
 
     def __post_init__(self) -> None:
@@ -86,6 +94,8 @@ class OmplConfig:
             raise SuiteError(f"resolution_rad must be in (0, 0.2] rad, got {self.resolution_rad!r}")
         if self.simplifier not in SIMPLIFIERS:
             raise SuiteError(f"simplifier must be one of {', '.join(SIMPLIFIERS)}, got {self.simplifier!r}")
+        if self.motion_check not in MOTION_CHECKS:
+            raise SuiteError(f"motion_check must be one of {', '.join(MOTION_CHECKS)}, got {self.motion_check!r}")
         if not self.rope_delta_rad > 0:
             raise SuiteError(f"rope_delta_rad must be > 0, got {self.rope_delta_rad!r}")
         if not self.simplify_time_s >= 0:
@@ -263,9 +273,10 @@ class _OmplPlanner(PlannerBase):
         simplify_budget_s = min(cfg.simplify_time_s, 0.5 * budget_s)
         solve_budget_s = budget_s - simplify_budget_s
         op = OmplProblem(world, problem.q_start, problem.q_goal, resolution_rad=resolution_rad,
-                         optimizing=self.optimizing)
+                         optimizing=self.optimizing, certify=cfg.motion_check == "certified")
         op.attach(self._make(op.si))
-        stats: dict[str, Any] = {"solver": self.solver, "resolution_rad": resolution_rad}
+        stats: dict[str, Any] = {"solver": self.solver, "resolution_rad": resolution_rad,
+                                 "motion_check": cfg.motion_check}
         path = simplifier = None
         progress: list[list] = []  # optimizing planners: [time in the solve, best cost or None] points
         try:
@@ -313,6 +324,8 @@ class _OmplPlanner(PlannerBase):
             stats["simplify_time_s"] = time.perf_counter() - t_simp
             stats["length_after_rad"] = path.length()
             stats["motion_checks"] = op.validator.motions
+            stats.update(certified_motion_checks=op.validator.certified_calls,
+                         certify_s=round(op.validator.certify_s, 6))
             Q = drop_collinear(path_array(path))
             stats["waypoints"] = len(Q)
         finally:
@@ -323,6 +336,15 @@ class _OmplPlanner(PlannerBase):
 
         # The path runs between the very start and goal states; snap away float noise, if any.
         return snapped_to_ends(problem, Q, stats)
+
+
+def _certified_if_asked(cfg: OmplConfig, world, Q: np.ndarray) -> bool:
+    """True unless `cfg` asks for certified motions and the exact check does not certify path Q."""
+    if cfg.motion_check != "certified":
+        return True
+    from scenes.fcl_certify import CERTIFIED, certifier
+
+    return certifier(world).certify(Q).verdict == CERTIFIED
 
 
 class RRTConnectPlanner(_OmplPlanner):
@@ -398,9 +420,10 @@ class AORRTCPlanner(_OmplPlanner):
     def _attempt(self, problem, world, *, resolution_rad, budget_s, seed):
         # OMPL 2.0.1's AORRTC reports a failure ("Zero-length path found") when its trees connect
         # start and goal directly; a free straight motion is that optimal path, checked here first.
-        if world.motion_free(problem.q_start, problem.q_goal, resolution_rad=resolution_rad):
-            Q = np.stack([np.asarray(problem.q_start, float), np.asarray(problem.q_goal, float)])
+        Q = np.stack([np.asarray(problem.q_start, float), np.asarray(problem.q_goal, float)])
+        if world.motion_free(*Q, resolution_rad=resolution_rad) and _certified_if_asked(self.config, world, Q):
             return PlanResult(PlanStatus.SUCCESS, Q, {"solver": self.solver, "resolution_rad": resolution_rad,
+                                                      "motion_check": self.config.motion_check,
                                                       "direct": True, "progress": []})
         return super()._attempt(problem, world, resolution_rad=resolution_rad, budget_s=budget_s, seed=seed)
 

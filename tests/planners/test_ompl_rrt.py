@@ -171,3 +171,53 @@ def test_aorrtc_returns_the_free_straight_motion(open_transit):
     r = make_planner("aorrtc", AORRTCConfig(time_limit_s=0.5)).plan(open_transit)
     assert r.status is PlanStatus.SUCCESS and r.stats["direct"] is True
     assert np.array_equal(r.path, np.stack([open_transit.q_start, open_transit.q_goal]))
+
+
+def _free_ends_across(world, q0: np.ndarray, q1: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Two free states a, b on the straight motion q0 -> q1 with a blocked stretch between them and
+    max |b - a| <= 0.2 rad: the last free sample before its first collision, the first after."""
+    n = int(np.ceil(np.max(np.abs(q1 - q0)) / 1e-3))
+    Q = q0 + np.linspace(0.0, 1.0, n + 1)[:, None] * (q1 - q0)
+    free = np.array([world.is_free(q) for q in Q])
+    hit = np.flatnonzero(~free)
+    if len(hit) == 0 or hit[0] == 0:
+        return None
+    after = np.flatnonzero(free[hit[0]:])
+    if len(after) == 0:
+        return None
+    a, b = Q[hit[0] - 1], Q[hit[0] + after[0]]
+    return (a, b) if np.max(np.abs(b - a)) <= 0.2 else None
+
+
+def test_certified_motion_check_rejects_what_the_samples_miss(problems):
+    from planners.ompl_adapter import OmplProblem
+
+    found = None
+    for p in problems:  # a straight start-goal motion through a thin part of the scene
+        world = collision_world(p)
+        found = found or (_free_ends_across(world, np.asarray(p.q_start), np.asarray(p.q_goal))
+                          if p.pre_status is None else None)
+        if found:
+            break
+    if found is None:
+        pytest.skip("no problem's straight motion crosses a blocked stretch of at most 0.2 rad")
+    a, b = found
+    step = float(np.max(np.abs(b - a)))  # one step: the samples are the two free ends
+    checks = {}
+    for certify in (False, True):
+        op = OmplProblem(world, p.q_start, p.q_goal, resolution_rad=step, optimizing=False, certify=certify)
+        checks[certify] = (op.validator.motion_free(a, b), op.validator.certified_calls)
+    assert checks[False] == (True, 0)  # the field's rule: both samples free
+    assert checks[True] == (False, 1)  # the exact check finds the collision between them
+
+
+def test_rrt_with_certified_motions_returns_a_certified_path(transit):
+    from suite.scoring.validate import certify_path
+
+    r = make_planner("rrt", RRTConnectConfig(motion_check="certified")).plan(transit)
+    assert r.status is PlanStatus.SUCCESS and r.stats["motion_check"] == "certified"
+    assert r.stats["certified_motion_checks"] > 0 and r.stats["certify_s"] > 0
+    assert certify_path(r.path, collision_world(transit))["verdict"] == "certified"
+    assert make_planner("rrt").plan(transit).stats["certified_motion_checks"] == 0
+    with pytest.raises(SuiteError, match="motion_check must be one of samples, certified, got 'exact'"):
+        RRTConnectConfig(motion_check="exact")
