@@ -14,8 +14,8 @@ Rule (documented in docs/ and written into the tuned-config file):
 2. among candidates that solve as many, a feasibility planner ("time") takes the lowest median
    time to solve (failures at the budget), an optimizing planner ("length") the lowest median
    length over the best known path on the problems every candidate solved;
-3. a difference within `TOLERANCE` (10% in time, 1% in length) is a tie, and a tie keeps the
-   earlier candidate (the grid lists class defaults first).
+3. a difference within `TOLERANCE` (10% in time, 1% in length), or within `ABS_TOLERANCE` (5 ms
+   in time), is a tie, and a tie keeps the earlier candidate (the grid lists class defaults first).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from suite.report.outcomes import Outcome, outcomes, solved_count
 RULE = ("candidates under 50% on a family where another candidate solves more of it are out (if any is left); "
         "then most distinct problems solved; ties: lowest median time to solve (failures at the budget) for "
         "objective 'time', lowest median length ratio on the problems every candidate solved for 'length', "
-        "within 10% (time) or 1% (length) counted as equal; then the earlier candidate")
+        "within 10% or 5 ms (time) or 1% (length) counted as equal; then the earlier candidate")
 #: How the rule weighs families: its name, and what it changes in RULE.
 WEIGHTINGS = {
     "family": "families weigh equally: 'solved' is the mean over families of each family's solved fraction, "
@@ -44,6 +44,11 @@ TUNING_METRICS = ("planning_time_s", "length_ratio", "path_length_rad")
 #: Relative differences of the tie-break figure treated as equal: 10% in median time (timings on a
 #: shared machine vary that much), 1% in median length ratio.
 TOLERANCE = {"time": 0.10, "length": 0.01}
+#: Absolute differences treated as equal: 5 ms in median time. With compiled checks `rrt`'s medians
+#: are 2-3 ms, where 10% is 0.3 ms: below what a trial's clock can tell apart on a shared 2-core
+#: machine (one scheduler quantum is 4 ms at Linux's common CONFIG_HZ=250), and two tunings of
+#: the same candidates chose differently. None for length (a ratio: no absolute scale).
+ABS_TOLERANCE = {"time": 0.005, "length": 0.0}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,7 +121,8 @@ def choose(results: Sequence[CandidateResult], *, objective: str, weighting: str
     tied = [i for i in pool if solved(results[i]) >= best - 1e-12]
     lowest = min(cost(results[i]) for i in tied)
     # a difference within the tolerance is noise: the earlier candidate (the defaults first) keeps it
-    return next(i for i in tied if cost(results[i]) <= lowest * (1 + TOLERANCE[objective]))
+    band = max(lowest * TOLERANCE[objective], ABS_TOLERANCE[objective])
+    return next(i for i in tied if cost(results[i]) <= lowest + band)
 
 
 def table_rows(results: Sequence[CandidateResult], *, chosen: int, pooled: int | None = None) -> list[dict[str, Any]]:

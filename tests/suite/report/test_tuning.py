@@ -52,6 +52,10 @@ def test_choice_rule_success_first_then_the_objective_then_order():
     assert choose([_result(9, 0.3, 1.02), _result(9, 0.3, 1.0)], objective="length", weighting="pooled") == 1
     assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 0
     assert choose([_result(9, 0.2, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 1
+    # milliseconds: up to 5 ms more is a tie however large a fraction (3 or 6.9 ms against 2 ms); 6.1 ms more is not
+    assert choose([_result(9, 0.003, 1.0), _result(9, 0.002, 1.0)], objective="time", weighting="pooled") == 0
+    assert choose([_result(9, 0.0069, 1.0), _result(9, 0.002, 1.0)], objective="time", weighting="pooled") == 0
+    assert choose([_result(9, 0.0081, 1.0), _result(9, 0.002, 1.0)], objective="time", weighting="pooled") == 1
 
 
 def test_weak_family_is_flagged_only_when_another_candidate_does_better():
