@@ -294,7 +294,8 @@ class _OmplPlanner(PlannerBase):
             code = status.getStatus()
             T = ob.PlannerStatus.PlannerStatusType
             stats.update(solve_time_s=solve_time_s, solver_status=status.asString(),
-                         motion_checks=op.validator.motions, **self._planner_stats(op.planner))
+                         motion_checks=op.validator.motions, certified_motion_checks=op.validator.certified_calls,
+                         certify_s=round(op.validator.certify_s, 6), **self._planner_stats(op.planner))
             if self.graph_stats:
                 data = ob.PlannerData(op.si)
                 op.planner.getPlannerData(data)
