@@ -30,6 +30,7 @@ from suite.report.summary_stats import (
 )
 from suite.report.summary_tables import (
     attribution_summary,
+    best_known_agreement,
     cause_counts,
     certification_counts,
     cold_start,
@@ -67,7 +68,9 @@ def summary_json(
     Keys: distinct_problems, scenes, trivial_problems, few_problems (fewer than FEW_PROBLEMS),
     planners: {NAME: {success: {k, n, rate, ci95, trials}, status_counts, failure_causes: {CAUSE:
     {FAMILY: trials}} (planners.base.FailureReason), certification: {certified,
-    unproved, collision, not checked} (successful trials by exact verdict), cold_start {cold_trials,
+    unproved, collision, not checked} (successful trials by exact verdict), best_known {successes,
+    equal, beaten: [{problem_id, length_rad, best_known_rad, ratio}]} (certified paths shorter than
+    the dataset's best known by more than 0.1%), cold_start {cold_trials,
     warm_trials, planning_time_s: {cold, warm}, setup_time_s: {cold, warm}} (time medians are over
     warm trials), attribution {engine, trials, queries, s_per_query, query_share} (or null for a
     planner that does not count its collision queries), metrics: {METRIC: {median,
@@ -96,6 +99,7 @@ def summary_json(
             "status_counts": g.status_counts,
             "failure_causes": causes.get(p, {}),
             "certification": certification_counts(records, p),
+            "best_known": best_known_agreement(records, p),
             "attribution": attribution_summary(records, p),
             "cold_start": cold_start(records, p),
             "metrics": {m: _stats_json(g.metrics[m]) for m in SUMMARY_METRICS},

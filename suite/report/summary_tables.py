@@ -121,6 +121,48 @@ def certification_line(records: Sequence[dict[str, Any]], planners: Sequence[str
     return "Exact verdict of the successes (docs/certification.md): " + "; ".join(parts) + "."
 
 
+#: A path within this fraction of its problem's best known length equals it (0.1%).
+BEST_KNOWN_EQUAL = 1e-3
+BEST_KNOWN_INTRO = (
+    "Each successful trial's joint path length against its problem's best known length (the dataset's "
+    "reference): equal within 0.1%, or shorter. A certified path shorter by more than 0.1% beats the best "
+    "known, and is listed by problem: the dataset's best known is not the best there is.")
+
+
+def best_known_agreement(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any]:
+    """A planner's successes against the best known lengths: {successes (with a best known),
+    equal (within BEST_KNOWN_EQUAL), beaten: [{problem_id, length_rad, best_known_rad, ratio}] for
+    the certified ones shorter by more than that, longest gain first}."""
+    n = equal = 0
+    beaten = []
+    for r in records:
+        if r.get("planner") != planner or r.get("status") != SUCCESS:
+            continue
+        best, length = r.get("reference_length_rad"), (r.get("metrics") or {}).get("path_length_rad")
+        if not best or length is None:
+            continue
+        n += 1
+        ratio = float(length) / float(best)
+        if abs(ratio - 1.0) <= BEST_KNOWN_EQUAL:
+            equal += 1
+        elif ratio < 1.0 - BEST_KNOWN_EQUAL and (r.get("certification") or {}).get("verdict") == "certified":
+            beaten.append({"problem_id": r.get("problem_id"), "length_rad": round(float(length), 6),
+                           "best_known_rad": round(float(best), 6), "ratio": round(ratio, 4)})
+    beaten.sort(key=lambda b: b["ratio"])
+    return {"successes": n, "equal": equal, "beaten": beaten}
+
+
+def best_known_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+    headers = ["planner", "successes with a best known", "equal (0.1%)", "certified and shorter", "problems (ratio)"]
+    rows = []
+    for p in planners:
+        a = best_known_agreement(records, p)
+        shown = ", ".join(f"{b['problem_id']} ({b['ratio']:.3f})" for b in a["beaten"][:10])
+        more = len(a["beaten"]) - 10
+        rows.append([p, a["successes"], a["equal"], len(a["beaten"]), shown + (f", and {more} more" if more > 0 else "")])
+    return headers, rows
+
+
 def composition(records: Sequence[dict[str, Any]]) -> str:
     """One line: on how many distinct problems (how many trivial) and scenes the figures rest, and a
     warning when they are fewer than `FEW_PROBLEMS`."""
@@ -361,6 +403,9 @@ def summary_markdown(
         md.append(tabulate(*reversed(common_rows(summary.common, planners)), tablefmt="github"))
     md += ["", "## Certified paths (successful trials)", "", CERTIFICATION_INTRO, ""]
     md.append(tabulate(*reversed(certification_rows(records, planners)), tablefmt="github"))
+    if any(r.get("reference_length_rad") for r in records):
+        md += ["", "## Against the best known paths (successful trials)", "", BEST_KNOWN_INTRO, ""]
+        md.append(tabulate(*reversed(best_known_rows(records, planners)), tablefmt="github"))
     if any(r.get("attribution") for r in records):
         md += ["", "## Where planning time goes", "", ATTRIBUTION_INTRO, ""]
         md.append(tabulate(*reversed(attribution_rows(records, planners)), tablefmt="github"))

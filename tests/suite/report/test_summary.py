@@ -253,3 +253,24 @@ def test_the_time_attribution_plot_is_drawn_only_when_a_record_attributes(tmp_pa
     assert plot_time_attribution([other], planners=["trajopt"], path=tmp_path / "none.png") is None
     p = plot_time_attribution([counted, other], planners=["rrt", "trajopt"], path=tmp_path / "att.png")
     assert p is not None and p.stat().st_size > 5_000
+
+
+def test_best_known_agreement_counts_equal_paths_and_lists_certified_shorter_ones(tmp_path):
+    from suite.report.summary_tables import best_known_agreement
+
+    def with_best(rec, best, verdict="certified", pid="p"):
+        return {**rec, "reference_length_rad": best, "problem_id": pid, "certification": {"verdict": verdict}}
+
+    recs = [with_best(record("a", seed=0, length_rad=1.0), 1.0005, pid="equal"),  # within 0.1%
+            with_best(record("a", seed=1, length_rad=0.5), 1.0, pid="shorter"),  # certified, half as long
+            with_best(record("a", seed=2, length_rad=0.5), 1.0, verdict="collision", pid="hugging"),  # not certified
+            with_best(record("a", seed=3, length_rad=1.2), 1.0, pid="longer"),
+            with_best(record("a", seed=4, status="timeout"), 1.0, pid="failed"),
+            record("a", seed=5, length_rad=1.0)]  # no best known
+    a = best_known_agreement(recs, "a")
+    assert a["successes"] == 4 and a["equal"] == 1
+    assert a["beaten"] == [{"problem_id": "shorter", "length_rad": pytest.approx(0.5), "best_known_rad": 1.0,
+                            "ratio": 0.5}]
+    write_summary(tmp_path, recs)
+    assert json.loads((tmp_path / "summary.json").read_text())["planners"]["a"]["best_known"]["equal"] == 1
+    assert "shorter (0.500)" in (tmp_path / "summary.md").read_text()
