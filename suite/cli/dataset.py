@@ -1,4 +1,4 @@
-"""`python -m suite dataset build|verify|show|recertify|rewitness`: frozen datasets of problems with reference solutions."""
+"""`python -m suite dataset build|verify|show|recertify|rereference|rewitness`: frozen datasets of problems with reference solutions."""
 
 from __future__ import annotations
 
@@ -33,6 +33,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="AORRTC budget per reference planned again (default 10)")
     r.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
     r.add_argument("--no-progress", action="store_true", help="no progress output")
+    o = sub.add_parser("rereference", help="write a revision of a dataset whose best known paths come from a long "
+                                           "offline search and a local optimizer alone (same problems and ids)")
+    o.add_argument("--from", dest="source", required=True, help="the dataset to revise (left untouched)")
+    o.add_argument("--name", required=True, help="the revision's name (directory under scenes/datasets/)")
+    o.add_argument("--search-s", type=positive_float, default=20.0,
+                   help="AORRTC's budget per non-trivial problem, s (default 20)")
+    o.add_argument("--starts", type=nonneg_int, default=3,
+                   help="RRT-Connect runs whose paths the local optimizer also starts from (default 3)")
+    o.add_argument("--polish-s", type=positive_float, default=5.0,
+                   help="the local optimizer's budget per start, s (default 5)")
+    o.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
+    o.add_argument("--no-progress", action="store_true", help="no progress output")
     w = sub.add_parser("rewitness", help="apply the witness rule (at least 0.1 mm of clearance) to a dataset "
                                          "built before it, in place (not for a shipped dataset)")
     w.add_argument("name", help="dataset name")
@@ -44,7 +56,31 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     return {"build": _build, "verify": _verify, "show": _show, "recertify": _recertify,
-            "rewitness": _rewitness}[args.action](args)
+            "rereference": _rereference, "rewitness": _rewitness}[args.action](args)
+
+
+def _rereference(args: argparse.Namespace) -> int:
+    from suite.problems.dataset import dataset_dir, read_manifest
+    from suite.run.best_known import JOURNAL_FILE, rereference_dataset
+    from suite.run.interrupt import Interrupted, SignalGuard
+
+    read_manifest(dataset_dir(args.source))  # an unknown source fails before any work
+    out = dataset_dir(args.name)
+    with SignalGuard():
+        try:
+            m = rereference_dataset(args.source, args.name, search_s=args.search_s, rrt_starts=args.starts,
+                                    polish_s=args.polish_s, jobs=args.jobs, argv=sys.argv[1:],
+                                    progress_bar=not args.no_progress)
+        except Interrupted as exc:
+            print(f"interrupted by {exc.name}: the problems searched so far are kept in {out / JOURNAL_FILE}; "
+                  f"run the same command again to go on", file=sys.stderr)
+            return exc.exit_code
+    r = m["rereferenced"]
+    print(f"dataset {m['name']} ({m['hash']}), a revision of {m['revision_of']['name']}: {r['searched']} best known "
+          f"paths searched again, {len(r['kept_from_source'])} kept (not solved by the search); new / old length "
+          f"{r['new_over_old_length_quantiles']}; shorter {r['shorter_than_source']}, equal {r['equal_to_source']}, "
+          f"longer {r['longer_than_source']}")
+    return 0
 
 
 def _rewitness(args: argparse.Namespace) -> int:

@@ -212,3 +212,59 @@ def test_every_problem_stores_a_certified_witness_with_its_clearance(small):
             assert w["clearance_min_m"] > min_clearance_m(world, ds.references[pid])
     c = manifest["witness_clearance_m"]
     assert c["n"] == sum(not m["trivial"] for m in ds.meta.values()) and c["min"] <= c["median"]
+
+
+def test_rereference_takes_every_best_known_from_the_offline_search_and_resumes(small, tmp_path):
+    from suite.run.best_known import JOURNAL_FILE, rereference_dataset
+
+    d, _ = small
+    src_records = [json.loads(x) for x in (d / "problems.jsonl").read_text().splitlines()]
+    hard = [r["problem_id"] for r in src_records if not r["trivial"]]
+    out = tmp_path / "v-next"
+    out.mkdir()
+    # an interrupted search left one problem in the journal (not solved): it is not searched again
+    (out / JOURNAL_FILE).write_text(json.dumps({"problem_id": hard[0], "best": None, "starts": []}) + "\n")
+    manifest = rereference_dataset(str(d), str(out), search_s=0.5, rrt_starts=1, polish_s=0.5, jobs=1,
+                                   argv=["test"], progress_bar=False)
+    r = manifest["rereferenced"]
+    assert r["searched"] == len(hard) and r["kept_from_source"] == [hard[0]]
+    counts = verify_dataset(str(out))  # every reference certified, hashes consistent
+    assert counts["references"]["certified"] == counts["problems"]
+    new = {json.loads(x)["problem_id"]: json.loads(x) for x in (out / "problems.jsonl").read_text().splitlines()}
+    assert set(new) == {r["problem_id"] for r in src_records}  # the same problems and ids
+    for pid in hard[1:]:
+        ref = new[pid]["reference"]
+        assert ref["planner"] == "offline-search" and ref["replaces"]["length_rad"] > 0
+    assert new[hard[0]]["reference"]["kept_from_source"] is True
+    journal = [json.loads(x) for x in (out / JOURNAL_FILE).read_text().splitlines()]
+    assert {j["problem_id"] for j in journal} == set(hard) and all("path" not in (j["best"] or {}) for j in journal)
+    with pytest.raises(SuiteError, match="already exists"):
+        rereference_dataset(str(d), str(out), search_s=0.5, rrt_starts=1, polish_s=0.5, jobs=1, argv=["test"],
+                            progress_bar=False)
+
+
+def test_polish_never_lengthens_and_keeps_every_segment_certified(small):
+    from planners.worlds import collision_world
+    from scenes.fcl_certify import certifier
+    from suite.run.polish import path_length, polish
+
+    d, _ = small
+    ds = load_dataset(str(d))
+    pid = next(pid for pid in ds.ids if not ds.meta[pid]["trivial"])
+    world = collision_world(ds.problems[ds.ids.index(pid)])
+    cert = certifier(world)
+    # a raw RRT-Connect path (no shortcuts) with every motion certified: certified, with slack to take
+    from planners.ompl_rrt import RRTConnectConfig
+    from planners.registry import make_planner
+
+    problem = ds.problems[ds.ids.index(pid)].with_(time_limit_s=60.0, seed=5)
+    raw = make_planner("rrt", RRTConnectConfig(motion_check="certified", simplify_time_s=0.0,
+                                               resolution_rad=0.01)).plan(problem)
+    path = np.asarray(raw.path, float)
+    assert cert.certify(path).verdict == "certified"
+    p = polish(path, cert, time_s=2.0)
+    assert p.length_rad < path_length(path) and p.length_before_rad == pytest.approx(path_length(path))
+    assert np.array_equal(p.path[0], path[0]) and np.array_equal(p.path[-1], path[-1])
+    assert cert.certify(p.path).verdict == "certified"
+    lo, hi = world.robot.lower_rad, world.robot.upper_rad
+    assert np.all(p.path >= lo - 1e-12) and np.all(p.path <= hi + 1e-12)
