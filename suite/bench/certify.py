@@ -25,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--run", default=None, help="also every successful path of this run directory, per planner")
     p.add_argument("--repeats", type=positive_int, default=3, help="timed runs of each check per path (default 3)")
     p.add_argument("--json", action="store_true", help="print the per-path figures as JSON")
+    p.add_argument("--breakdown", action="store_true",
+                   help="also say where the exact check's time goes (its tiers, timed around each call), and "
+                        "what the 0.01 rad check costs on the compiled kernels")
     p.add_argument("--figure", metavar="PNG", default=None,
                    help="also draw the deepest reference collision between two 0.01 rad states to PNG")
 
@@ -47,6 +50,68 @@ def measure_path(path: np.ndarray, world, *, repeats: int) -> dict:
     return {"verdict": c.verdict, "detail": c.detail, "fixed_states": fixed_states,
             "states": c.states, "distance_queries": c.distance_queries, "fixed_s": fixed_s, "certify_s": exact_s,
             "ratio": exact_s / fixed_s}
+
+
+#: The certifier's parts timed by `breakdown`: its method, and what it is.
+PARTS = {"_evaluate": "FK and sphere bounds (numpy)", "_reach": "lever arms", "_pair_lambdas": "body-pair motion bounds",
+         "_tables_apart": "joint tables", "_exact": "proved FCL distances (python-fcl)"}
+
+
+def breakdown(items: list[tuple]) -> dict:
+    """Where the exact check's seconds go over paths [(problem, path)]: each part of PARTS timed
+    around its calls (the rest is the bisection's own bookkeeping), the exact FCL queries, and the
+    0.01 rad check on the judge's numpy world and on the planners' compiled one."""
+    from planners.worlds import collision_world, planning_world
+    from scenes.fcl_certify import Certifier
+    from suite.scoring.validate import VALIDATION_RESOLUTION_RAD
+
+    spent = dict.fromkeys(PARTS, 0.0)
+    total = fixed_numpy = fixed_compiled = 0.0
+    queries = 0
+    for problem, path in items:
+        path = np.asarray(path, float)
+        world = collision_world(problem)
+        cert = Certifier(world)  # its own: the wrappers below must not stay on the world's cached one
+
+        def timed(name, fn):
+            def wrapper(*a, **k):
+                t = time.perf_counter()
+                try:
+                    return fn(*a, **k)
+                finally:
+                    spent[name] += time.perf_counter() - t
+            return wrapper
+
+        for name in PARTS:
+            setattr(cert, name, timed(name, getattr(cert, name)))
+        c = cert.certify(path)
+        total += c.time_s
+        queries += c.distance_queries
+        t = time.perf_counter()
+        world.path_free(path, resolution_rad=VALIDATION_RESOLUTION_RAD)
+        fixed_numpy += time.perf_counter() - t
+        compiled = planning_world(problem)
+        compiled.path_free(path, resolution_rad=VALIDATION_RESOLUTION_RAD)  # its first call compiles or loads
+        t = time.perf_counter()
+        compiled.path_free(path, resolution_rad=VALIDATION_RESOLUTION_RAD)
+        fixed_compiled += time.perf_counter() - t
+    return {"paths": len(items), "certify_s": total, "parts_s": spent,
+            "rest_s": total - sum(spent.values()), "exact_queries": queries,
+            "fixed_numpy_s": fixed_numpy, "fixed_compiled_s": fixed_compiled}
+
+
+def _print_breakdown(b: dict) -> None:
+    total = b["certify_s"]
+    n = max(b["paths"], 1)
+    print(f"\nwhere the exact check's time goes: {b['paths']} references, {total:.2f} s in all "
+          f"({1e3 * total / n:.1f} ms a path; the 0.01 rad check: {1e3 * b['fixed_numpy_s'] / n:.1f} ms numpy, "
+          f"{1e3 * b['fixed_compiled_s'] / n:.2f} ms compiled)")
+    for name, what in PARTS.items():
+        v = b["parts_s"][name]
+        print(f"  {what:36s} {v:8.2f} s {100 * v / total:5.1f}%")
+    print(f"  {'bisection bookkeeping (the rest)':36s} {b['rest_s']:8.2f} s {100 * b['rest_s'] / total:5.1f}%")
+    q = b["exact_queries"]
+    print(f"  exact FCL queries: {q / n:.0f} a path, {1e6 * b['parts_s']['_exact'] / max(q, 1):.0f} µs each")
 
 
 def _groups(args) -> dict[str, list[tuple]]:
@@ -117,8 +182,9 @@ def run(args: argparse.Namespace) -> int:
     if args.figure:
         drawn = between_samples_figure(groups["references"], out["references"], args.figure)
         print(f"{args.figure}: {drawn}" if drawn else f"{args.figure}: no reference collides between samples; not drawn")
+    extra = breakdown(groups["references"]) if args.breakdown else None
     if args.json:
-        print(json.dumps(out))
+        print(json.dumps(out if extra is None else {**out, "breakdown": extra}))
         return 0
     print(f"exact verdict vs the 0.01 rad check, per path (medians of {args.repeats} runs each); "
           f"ratio = certify seconds / fixed-step seconds")
@@ -135,4 +201,6 @@ def run(args: argparse.Namespace) -> int:
               f"{np.median([x['states'] / x['fixed_states'] for x in rows]):12.2f} "
               f"{np.median([x['distance_queries'] for x in rows]):11.0f} "
               f"{1e3 * np.median([x['certify_s'] for x in rows]):10.2f} {1e3 * np.median([x['fixed_s'] for x in rows]):8.2f}")
+    if extra is not None:
+        _print_breakdown(extra)
     return 0
