@@ -202,6 +202,22 @@ class TrajoptPlanner(PlannerBase):
         result = SnoptSolver().Solve(prog)
         return result.GetSolution(ik.q()) if result.is_success() else None
 
+    def _initial_control_points(self, problem: PlanningProblem, ds, plant_context, counter) -> tuple[np.ndarray, str]:
+        """The initial guess's control points (num_control_points, 7) and its name: the joint-space
+        line, or a bend through `_via_point` (`counter` counts its evaluations). A subclass may seed
+        the optimization otherwise (`suite.run.polish.SeededTrajopt`: from a given path)."""
+        cfg = self.config
+        q_start = np.asarray(problem.q_start, float)
+        q_goal = np.asarray(problem.q_goal, float)
+        via = None
+        if cfg.initial_guess == "via_waypoints":
+            via = self._via_point(problem, ds.plant, plant_context, ds.plant.GetFrameByName("body", ds.wsg), counter)
+        if via is not None:
+            u = np.linspace(0, 1, cfg.num_control_points)[:, None]
+            return np.where(u < 0.5, q_start + 2 * u * (via - q_start), via + (2 * u - 1) * (q_goal - via)), \
+                "via_waypoints"
+        return np.linspace(q_start, q_goal, cfg.num_control_points), "straight"
+
     def _queries(self, trajopt, prog, distance, evaluations, samples: list, queries: int) -> dict:
         """`planners.drake_queries.query_stats`: the count, and the seconds replayed at the sampled
         iterates, each at one of the constraint's path samples (in turn)."""
@@ -240,18 +256,8 @@ class TrajoptPlanner(PlannerBase):
         for s in samples:
             trajopt.AddPathPositionConstraint(distance, float(s))
 
-        guess = "straight"
-        via = None
         via_evaluations = EvaluationCounter()
-        if cfg.initial_guess == "via_waypoints":
-            via = self._via_point(problem, plant, plant_context, plant.GetFrameByName("body", ds.wsg),
-                                  via_evaluations)
-        if via is not None:
-            guess = "via_waypoints"
-            u = np.linspace(0, 1, cfg.num_control_points)[:, None]
-            ctrl = np.where(u < 0.5, q_start + 2 * u * (via - q_start), via + (2 * u - 1) * (q_goal - via))
-        else:
-            ctrl = np.linspace(q_start, q_goal, cfg.num_control_points)
+        ctrl, guess = self._initial_control_points(problem, ds, plant_context, via_evaluations)
         trajopt.SetInitialGuess(BsplineTrajectory(trajopt.basis(), [c[:, None] for c in ctrl]))
 
         out_of_time = []

@@ -1,4 +1,4 @@
-"""`python -m suite dataset build|verify|show|recertify|rereference|rewitness`: frozen datasets of problems with reference solutions."""
+"""`python -m suite dataset build|verify|show|recertify|rereference|refine|rewitness`: frozen datasets of problems with reference solutions."""
 
 from __future__ import annotations
 
@@ -42,9 +42,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     o.add_argument("--starts", type=nonneg_int, default=3,
                    help="RRT-Connect runs whose paths the local optimizer also starts from (default 3)")
     o.add_argument("--polish-s", type=positive_float, default=5.0,
-                   help="the local optimizer's budget per start, s (default 5)")
+                   help="the certified descent's budget per start, s (default 5)")
+    o.add_argument("--trajopt-s", type=positive_float, default=5.0,
+                   help="each trajectory optimization started from a path, s (default 5)")
     o.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
     o.add_argument("--no-progress", action="store_true", help="no progress output")
+    f = sub.add_parser("refine", help="run the local optimizers again from every offline-search best known path "
+                                      "of a revision not yet shipped, in place; keep what is shorter and certified")
+    f.add_argument("name", help="dataset name")
+    f.add_argument("--polish-s", type=positive_float, default=2.0, help="the certified descent's budget, s (default 2)")
+    f.add_argument("--trajopt-s", type=positive_float, default=5.0,
+                   help="each seeded trajectory optimization's budget, s (default 5)")
+    f.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
+    f.add_argument("--no-progress", action="store_true", help="no progress output")
     w = sub.add_parser("rewitness", help="apply the witness rule (at least 0.1 mm of clearance) to a dataset "
                                          "built before it, in place (not for a shipped dataset)")
     w.add_argument("name", help="dataset name")
@@ -56,7 +66,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     return {"build": _build, "verify": _verify, "show": _show, "recertify": _recertify,
-            "rereference": _rereference, "rewitness": _rewitness}[args.action](args)
+            "rereference": _rereference, "refine": _refine, "rewitness": _rewitness}[args.action](args)
+
+
+def _refine(args: argparse.Namespace) -> int:
+    from suite.problems.dataset import dataset_dir, read_manifest
+    from suite.run.best_known import REFINE_JOURNAL_FILE, refine_dataset
+    from suite.run.interrupt import Interrupted, SignalGuard
+
+    out = dataset_dir(args.name)
+    read_manifest(out)  # an unknown dataset fails before any work
+    with SignalGuard():
+        try:
+            m = refine_dataset(args.name, polish_s=args.polish_s, trajopt_s=args.trajopt_s, jobs=args.jobs,
+                               argv=sys.argv[1:], progress_bar=not args.no_progress)
+        except Interrupted as exc:
+            print(f"interrupted by {exc.name}: the problems refined so far are kept in {out / REFINE_JOURNAL_FILE}; "
+                  f"run the same command again to go on", file=sys.stderr)
+            return exc.exit_code
+    r = m["refined"]
+    print(f"dataset {m['name']} ({m['hash']}): {r['shortened']} of {r['tried']} best known paths shortened; "
+          f"new / old {r['new_over_old_length_quantiles']}")
+    return 0
 
 
 def _rereference(args: argparse.Namespace) -> int:
@@ -69,7 +100,8 @@ def _rereference(args: argparse.Namespace) -> int:
     with SignalGuard():
         try:
             m = rereference_dataset(args.source, args.name, search_s=args.search_s, rrt_starts=args.starts,
-                                    polish_s=args.polish_s, jobs=args.jobs, argv=sys.argv[1:],
+                                    polish_s=args.polish_s, trajopt_s=args.trajopt_s, jobs=args.jobs,
+                                    argv=sys.argv[1:],
                                     progress_bar=not args.no_progress)
         except Interrupted as exc:
             print(f"interrupted by {exc.name}: the problems searched so far are kept in {out / JOURNAL_FILE}; "

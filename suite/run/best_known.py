@@ -7,9 +7,13 @@ from this search alone:
    RRT-Connect runs with OMPL's full simplification, on the problem's python-fcl world with every
    obstacle grown by SEARCH_PADDING_M (1 mm), at 0.01 rad per joint; each path then validated and
    certified in the true world (the margin makes that almost sure);
-2. `suite.run.polish.polish`, a local optimizer of path length that keeps every segment
-   certified, started from each of those paths, shortest first (one more than POLISH_WITHIN times
-   as long as the best polished path is left);
+2. two local optimizers started from each of those paths, shortest first (one more than
+   POLISH_WITHIN times as long as the best so far is left; `local_optimum`):
+   `suite.run.polish.polish`, a descent of path length that keeps every segment certified, and
+   Drake's KinematicTrajectoryOptimization started from the path (`polish.seeded_trajopt`: the
+   `trajopt` planner's program, its control points spread along the given path instead of its own
+   straight or via-point guess; once with 10 and once with 16 control points), each certified
+   result descended again;
 3. the shortest certified result.
 No benchmarked planner's benchmark answer and no stored reference enters it (in recycle-v3, 288 of
 413 best known paths were `trajopt`'s own answers read back). A trivial problem keeps its straight
@@ -52,6 +56,11 @@ SEARCH_PADDING_M = 0.001
 #: A start is polished only if it is at most this many times as long as the best polished path so
 #: far (the starts go shortest first): a local optimizer does not halve a path.
 POLISH_WITHIN = 1.5
+#: Budget (s) of the trajectory optimization started from a search path (`local_optimum`).
+TRAJOPT_S = 5.0
+#: Control points of the trajectory optimizations started from each path (one run per count).
+TRAJOPT_CONTROL_POINTS = (10, 16)
+REFINE_JOURNAL_FILE = "refine.jsonl"
 #: Relative length difference under which two lengths are the same best known (0.1%).
 EQUAL_TOLERANCE = 1e-3
 
@@ -67,7 +76,8 @@ def search_job(arg: tuple) -> dict[str, Any]:
 
     from planners.worlds import padded_worlds
 
-    problem, search_s, rrt_starts, polish_s = arg
+    problem, search_s, rrt_starts, polish_s = arg[:4]
+    trajopt_s = arg[4] if len(arg) > 4 else TRAJOPT_S
     world = collision_world(problem)
     cert = certifier(world)
     # planned with the obstacles grown by SEARCH_PADDING_M (at full speed, with the planners' own
@@ -99,18 +109,51 @@ def search_job(arg: tuple) -> dict[str, Any]:
         if best is not None and length > POLISH_WITHIN * best["length_rad"]:
             entry["polished"] = f"no: over {POLISH_WITHIN}x the best polished length"
             continue
-        p = polish(path, cert, time_s=polish_s)
-        out = np.asarray(p.path, float).round(12)  # certified as it is stored
-        ok = validate_path(problem, out, world) is None and cert.certify(out).verdict == "certified"
-        entry.update(polished_rad=round(path_length(out), 6), polish_s=round(p.time_s, 3), polish_rounds=p.rounds,
-                     polished_certified=ok)
-        if not ok:  # rounding to 12 digits moved a waypoint onto a contact: keep the unpolished path
-            out = path.round(12)
-            if cert.certify(out).verdict != "certified":
-                continue
-        if best is None or path_length(out) < best["length_rad"]:
+        out, how = local_optimum(problem, path, world, cert, polish_s=polish_s, trajopt_s=trajopt_s)
+        entry.update(how)
+        if out is not None and (best is None or path_length(out) < best["length_rad"]):
             best = {"path": out.tolist(), "length_rad": path_length(out), "start": tag}
     return {"best": best, "starts": starts}
+
+
+def local_optimum(problem, path: np.ndarray, world, cert, *, polish_s: float,
+                  trajopt_s: float = TRAJOPT_S) -> tuple[np.ndarray | None, dict[str, Any]]:
+    """The shortest certified path the local optimizers make of the certified `path`: the certified
+    descent of `suite.run.polish.polish` from it, and Drake's trajectory optimization started
+    from it (`seeded_trajopt`) and then descended too. Returns (path rounded to 12 digits, or None
+    if nothing certified is left after rounding; what each step gave)."""
+    from suite.run.polish import seeded_trajopt
+    from suite.scoring.validate import validate_path
+
+    def certified(Q) -> bool:
+        return validate_path(problem, Q, world) is None and cert.certify(Q).verdict == "certified"
+
+    how: dict[str, Any] = {}
+    candidates = []
+    p = polish(path, cert, time_s=polish_s)
+    how.update(polished_rad=round(p.length_rad, 6), polish_s=round(p.time_s, 3), polish_rounds=p.rounds)
+    candidates.append(p.path)
+    for n in TRAJOPT_CONTROL_POINTS:
+        t0 = time.perf_counter()
+        r = seeded_trajopt(problem, path, time_s=trajopt_s, control_points=n)
+        got: dict[str, Any] = {"status": r.status.value, "s": round(time.perf_counter() - t0, 3)}
+        if r.path is not None:
+            Q = np.asarray(r.path, float)
+            got.update(rad=round(path_length(Q), 6), certified=certified(Q))
+            if got["certified"]:
+                q = polish(Q, cert, time_s=polish_s)
+                got["polished_rad"] = round(q.length_rad, 6)
+                candidates.append(q.path)
+        how[f"trajopt_{n}"] = got
+    best = None
+    for Q in sorted(candidates, key=path_length):
+        Q = np.asarray(Q, float).round(12)  # certified as it is stored
+        if certified(Q):
+            best = Q
+            break
+    if best is None and certified(np.asarray(path, float).round(12)):
+        best = np.asarray(path, float).round(12)
+    return best, how
 
 
 def _journal(out: Path) -> dict[str, dict]:
@@ -127,7 +170,7 @@ def _journal(out: Path) -> dict[str, dict]:
 
 
 def rereference_dataset(source: str, name: str, *, search_s: float = 20.0, rrt_starts: int = 3,
-                        polish_s: float = 5.0, jobs: int = 2, argv: list[str],
+                        polish_s: float = 5.0, trajopt_s: float = TRAJOPT_S, jobs: int = 2, argv: list[str],
                         progress_bar: bool = True) -> dict[str, Any]:
     """Write dataset `name`: `source` with every non-trivial reference from the offline search.
     Returns its manifest."""
@@ -150,10 +193,10 @@ def rereference_dataset(source: str, name: str, *, search_s: float = 20.0, rrt_s
         done = _journal(out)
         todo = [rec for rec in records if rec.get("benchmark", True) and not rec.get("trivial")
                 and rec["problem_id"] not in done]
-        budget = search_s + 5.0 * rrt_starts + (1 + rrt_starts) * (polish_s + 5.0) + 30.0
+        budget = search_s + 5.0 * rrt_starts + (1 + rrt_starts) * (3 * polish_s + 2 * trajopt_s + 5.0) + 30.0
         work = [Job(rec["problem_id"], search_job,
                     (problem_from_record(rec, scenes[rec["scene_key"]], time_limit_s=search_s), search_s, rrt_starts,
-                     polish_s), 3 * budget + 60, group=rec["scene_key"]) for rec in todo]
+                     polish_s, trajopt_s), 3 * budget + 60, group=rec["scene_key"]) for rec in todo]
         bar = tqdm(total=len(work), desc="offline search", unit="problem", disable=not progress_bar, file=sys.stderr)
         if work:
             ex = LocalExecutor(jobs=min(jobs, len(work)), init=worker_init)
@@ -207,7 +250,7 @@ def rereference_dataset(source: str, name: str, *, search_s: float = 20.0, rrt_s
             "revision_of": {"name": manifest.get("name", source), "hash": manifest["hash"]},
             "rereferenced": {
                 "command": " ".join(["python -m suite", *argv]), "git_commit": git_commit(), "versions": versions(),
-                "search_s": search_s, "rrt_starts": rrt_starts, "polish_s": polish_s,
+                "search_s": search_s, "rrt_starts": rrt_starts, "polish_s": polish_s, "trajopt_s": trajopt_s,
                 "searched": len(pairs) + len(kept), "kept_from_source": sorted(kept),
                 "new_over_old_length_quantiles": {k: round(float(np.quantile(ratio, q)), 4) for k, q in
                                                   (("min", 0), ("p10", 0.1), ("median", 0.5), ("p90", 0.9),
@@ -230,3 +273,94 @@ def rereference_dataset(source: str, name: str, *, search_s: float = 20.0, rrt_s
         (out / JOURNAL_FILE).write_text("\n".join(lines) + "\n")
         (out / LOCK_FILE).unlink(missing_ok=True)
     return new_manifest
+
+
+def refine_job(arg: tuple) -> dict[str, Any]:
+    """`local_optimum` from a problem's stored reference (runs in a worker process)."""
+    from planners.worlds import collision_world
+    from scenes.fcl_certify import certifier
+
+    problem, path, polish_s, trajopt_s = arg
+    world = collision_world(problem)
+    out, how = local_optimum(problem, np.asarray(path, float), world, certifier(world), polish_s=polish_s,
+                             trajopt_s=trajopt_s)
+    return {"path": None if out is None else out.tolist(), "how": how}
+
+
+def refine_dataset(name: str, *, polish_s: float = 2.0, trajopt_s: float = TRAJOPT_S, jobs: int = 2,
+                   argv: list[str], progress_bar: bool = True) -> dict[str, Any]:
+    """Run the local optimizers again from every offline-search reference of dataset `name`, in
+    place, keeping a result only if it is shorter and certified (a second pass after
+    `rereference_dataset`, for a revision not yet shipped). Journalled in refine.jsonl."""
+    from tqdm import tqdm
+
+    from suite.run.build_dataset import write_dataset_files
+    from suite.run.executors import Job, LocalExecutor
+    from suite.run.lock import LOCK_FILE, RunLock
+    from suite.run.runner import git_commit, worker_init
+
+    out = dataset_dir(name)
+    manifest = read_manifest(out)
+    t0 = time.perf_counter()
+    scene_rows = _read_jsonl(out / SCENES_FILE)
+    scenes = {rec["scene_key"]: scene_from_record(rec) for _, _, rec in scene_rows}
+    records = [rec for _, _, rec in _read_jsonl(out / PROBLEMS_FILE)]
+    with RunLock(out, what="dataset refine"):
+        done = {}
+        journal_path = out / REFINE_JOURNAL_FILE
+        if journal_path.exists():
+            for line in journal_path.read_text().splitlines():
+                try:
+                    rec = json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+                done[rec["problem_id"]] = rec
+        todo = [rec for rec in records if rec["reference"].get("planner") == "offline-search"
+                and rec["problem_id"] not in done]
+        work = [Job(rec["problem_id"], refine_job,
+                    (problem_from_record(rec, scenes[rec["scene_key"]], time_limit_s=trajopt_s),
+                     rec["reference"]["path"], polish_s, trajopt_s),
+                    3 * (len(TRAJOPT_CONTROL_POINTS) * (trajopt_s + polish_s) + polish_s) + 60,
+                    group=rec["scene_key"]) for rec in todo]
+        bar = tqdm(total=len(work), desc="refining", unit="problem", disable=not progress_bar, file=sys.stderr)
+        if work:
+            ex = LocalExecutor(jobs=min(jobs, len(work)), init=worker_init)
+            with open(journal_path, "a") as journal:
+                for outcome in ex.run(work):
+                    res = outcome.result if outcome.failure is None else {"path": None, "how": {
+                        "failure": outcome.failure, "message": outcome.message}}
+                    rec = {"problem_id": outcome.job.key, **res}
+                    journal.write(json.dumps(rec) + "\n")
+                    journal.flush()
+                    done[outcome.job.key] = rec
+                    bar.update(1)
+        bar.close()
+        new_records, gains = [], []
+        for rec in records:
+            found = done.get(rec["problem_id"])
+            if found is None or found.get("path") is None:
+                new_records.append(rec)
+                continue
+            length = path_length(np.asarray(found["path"], float))
+            if length < rec["reference_length_rad"] - 1e-9:
+                gains.append(length / rec["reference_length_rad"])
+                rec = {k: v for k, v in rec.items() if k != "record_hash"}
+                rec["reference"] = {**rec["reference"], "path": found["path"],
+                                    "config": {**rec["reference"]["config"], "refined": True}}
+                rec["reference_length_rad"] = length
+                rec["record_hash"] = record_hash(rec)
+            new_records.append(rec)
+        g = np.array(gains)
+        scene_lines = [line for _, line, _ in scene_rows]
+        manifest = {**manifest, "hash": dataset_hash(scene_lines, new_records), "refined": {
+            "command": " ".join(["python -m suite", *argv]), "git_commit": git_commit(), "polish_s": polish_s,
+            "trajopt_s": trajopt_s, "trajopt_control_points": list(TRAJOPT_CONTROL_POINTS), "tried": len(done),
+            "shortened": len(gains), "new_over_old_length_quantiles": {
+                k: round(float(np.quantile(g, q)), 4) for k, q in
+                (("min", 0), ("p10", 0.1), ("median", 0.5), ("p90", 0.9), ("max", 1))} if len(g) else {},
+            "total_s": round(time.perf_counter() - t0, 1)}}
+        write_dataset_files(out, scene_lines, new_records, manifest)
+        lines = [json.dumps({k: v for k, v in r.items() if k != "path"}) for r in done.values()]
+        journal_path.write_text("\n".join(lines) + "\n")
+        (out / LOCK_FILE).unlink(missing_ok=True)
+    return manifest

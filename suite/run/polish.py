@@ -92,3 +92,37 @@ def polish(path: np.ndarray, certifier, *, time_s: float = 5.0, piece_rad: float
         if start_len - path_length(Q) < tol_rad:
             step *= 0.5
     return Polished(Q, before, path_length(Q), rounds, tried, kept, time.perf_counter() - t0)
+
+
+def resample_by_length(path: np.ndarray, n: int) -> np.ndarray:
+    """n points (n, 7) evenly spaced by joint-space arc length along the polyline `path`, its ends
+    exact."""
+    path = np.asarray(path, float)
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] <= 0:
+        return np.repeat(path[:1], n, axis=0)
+    u = np.linspace(0.0, s[-1], n)
+    out = np.column_stack([np.interp(u, s, path[:, j]) for j in range(path.shape[1])])
+    out[0], out[-1] = path[0], path[-1]
+    return out
+
+
+def seeded_trajopt(problem, path: np.ndarray, *, time_s: float, control_points: int | None = None):
+    """Drake's KinematicTrajectoryOptimization (the `trajopt` planner's program, at its tuned
+    settings, or with `control_points`) started from `path` instead of its own guess: control
+    points spread evenly along the path's length. Its returned `PlanResult` (the path sampled from the
+    spline, checked densely by the planner)."""
+    from planners.registry import planner_class
+    from planners.trajopt import TrajoptPlanner
+    from suite.run.trial import make_config
+
+    seed = np.asarray(path, float)
+
+    class SeededTrajopt(TrajoptPlanner):
+        def _initial_control_points(self, problem, ds, plant_context, counter):
+            return resample_by_length(seed, self.config.num_control_points), "path"
+
+    cfg = make_config(planner_class("trajopt"), {} if control_points is None else
+                      {"num_control_points": control_points})
+    return SeededTrajopt(cfg).plan(problem.with_(time_limit_s=time_s))

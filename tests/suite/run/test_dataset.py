@@ -224,8 +224,8 @@ def test_rereference_takes_every_best_known_from_the_offline_search_and_resumes(
     out.mkdir()
     # an interrupted search left one problem in the journal (not solved): it is not searched again
     (out / JOURNAL_FILE).write_text(json.dumps({"problem_id": hard[0], "best": None, "starts": []}) + "\n")
-    manifest = rereference_dataset(str(d), str(out), search_s=0.5, rrt_starts=1, polish_s=0.5, jobs=1,
-                                   argv=["test"], progress_bar=False)
+    manifest = rereference_dataset(str(d), str(out), search_s=0.5, rrt_starts=1, polish_s=0.5, trajopt_s=1.0,
+                                   jobs=1, argv=["test"], progress_bar=False)
     r = manifest["rereferenced"]
     assert r["searched"] == len(hard) and r["kept_from_source"] == [hard[0]]
     counts = verify_dataset(str(out))  # every reference certified, hashes consistent
@@ -239,8 +239,19 @@ def test_rereference_takes_every_best_known_from_the_offline_search_and_resumes(
     journal = [json.loads(x) for x in (out / JOURNAL_FILE).read_text().splitlines()]
     assert {j["problem_id"] for j in journal} == set(hard) and all("path" not in (j["best"] or {}) for j in journal)
     with pytest.raises(SuiteError, match="already exists"):
-        rereference_dataset(str(d), str(out), search_s=0.5, rrt_starts=1, polish_s=0.5, jobs=1, argv=["test"],
-                            progress_bar=False)
+        rereference_dataset(str(d), str(out), search_s=0.5, rrt_starts=1, polish_s=0.5, trajopt_s=1.0, jobs=1,
+                            argv=["test"], progress_bar=False)
+    # the second pass: from every offline-search path again, in place, only shorter certified ones kept
+    from suite.run.best_known import REFINE_JOURNAL_FILE, refine_dataset
+
+    before = {pid: r["reference_length_rad"] for pid, r in new.items()}
+    m = refine_dataset(str(out), polish_s=0.3, trajopt_s=1.0, jobs=1, argv=["test"], progress_bar=False)
+    assert m["refined"]["tried"] == len(hard) - 1  # the one kept from the source is not an offline-search path
+    counts = verify_dataset(str(out))
+    assert counts["references"]["certified"] == counts["problems"]
+    after = {json.loads(x)["problem_id"]: json.loads(x) for x in (out / "problems.jsonl").read_text().splitlines()}
+    assert all(after[pid]["reference_length_rad"] <= before[pid] for pid in before)
+    assert len((out / REFINE_JOURNAL_FILE).read_text().splitlines()) == len(hard) - 1
 
 
 def test_polish_never_lengthens_and_keeps_every_segment_certified(small):
