@@ -69,12 +69,10 @@ def search_job(arg: tuple) -> dict[str, Any]:
     """The offline search of one problem (runs in a worker process): every start's length, what
     polishing made of it, and the shortest certified path."""
     from planners.registry import make_planner, planner_class
-    from planners.worlds import collision_world
+    from planners.worlds import collision_world, padded_worlds
     from scenes.fcl_certify import certifier
     from suite.run.trial import make_config
     from suite.scoring.validate import validate_path
-
-    from planners.worlds import padded_worlds
 
     problem, search_s, rrt_starts, polish_s = arg[:4]
     trajopt_s = arg[4] if len(arg) > 4 else TRAJOPT_S
@@ -156,8 +154,8 @@ def local_optimum(problem, path: np.ndarray, world, cert, *, polish_s: float,
     return best, how
 
 
-def _journal(out: Path) -> dict[str, dict]:
-    path = out / JOURNAL_FILE
+def _read_journal(path: Path) -> dict[str, dict]:
+    """problem_id -> its journalled result (a line cut short by an interruption is skipped)."""
     done = {}
     if path.exists():
         for line in path.read_text().splitlines():
@@ -169,17 +167,49 @@ def _journal(out: Path) -> dict[str, dict]:
     return done
 
 
+def _run_journalled(work: list, path: Path, done: dict[str, dict], failed, *, desc: str, jobs: int,
+                    progress_bar: bool) -> None:
+    """Run `work` (executor Jobs keyed by problem id) in worker processes, appending each result to
+    the journal at `path` as it comes (a failed job's is `failed(outcome)`) and into `done`."""
+    from tqdm import tqdm
+
+    from suite.run.executors import LocalExecutor
+    from suite.run.runner import worker_init
+
+    bar = tqdm(total=len(work), desc=desc, unit="problem", disable=not progress_bar, file=sys.stderr)
+    if work:
+        ex = LocalExecutor(jobs=min(jobs, len(work)), init=worker_init)
+        with open(path, "a") as journal:
+            for outcome in ex.run(work):
+                res = outcome.result if outcome.failure is None else failed(outcome)
+                rec = {"problem_id": outcome.job.key, **res}
+                journal.write(json.dumps(rec) + "\n")
+                journal.flush()
+                done[outcome.job.key] = rec
+                bar.update(1)
+    bar.close()
+
+
+def _rewrite_journal(path: Path, done: dict[str, dict], strip) -> None:
+    """The journal again, each record through `strip` (the paths are in the problems file now)."""
+    path.write_text("\n".join(json.dumps(strip(r)) for r in done.values()) + "\n")
+
+
+def _quantiles(values: np.ndarray) -> dict[str, float]:
+    """min, p10, median, p90 and max of `values` to 4 digits ({} if there are none)."""
+    return {k: round(float(np.quantile(values, q)), 4) for k, q in
+            (("min", 0), ("p10", 0.1), ("median", 0.5), ("p90", 0.9), ("max", 1))} if len(values) else {}
+
+
 def rereference_dataset(source: str, name: str, *, search_s: float = 20.0, rrt_starts: int = 3,
                         polish_s: float = 5.0, trajopt_s: float = TRAJOPT_S, jobs: int = 2, argv: list[str],
                         progress_bar: bool = True) -> dict[str, Any]:
     """Write dataset `name`: `source` with every non-trivial reference from the offline search.
     Returns its manifest."""
-    from tqdm import tqdm
-
     from suite.run.build_dataset import write_dataset_files
-    from suite.run.executors import Job, LocalExecutor
+    from suite.run.executors import Job
     from suite.run.lock import LOCK_FILE, RunLock
-    from suite.run.runner import git_commit, versions, worker_init
+    from suite.run.runner import git_commit, versions
 
     src, out = dataset_dir(source), dataset_dir(name)
     manifest = read_manifest(src)
@@ -190,26 +220,18 @@ def rereference_dataset(source: str, name: str, *, search_s: float = 20.0, rrt_s
     scenes = {rec["scene_key"]: scene_from_record(rec) for _, _, rec in scene_rows}
     records = [rec for _, _, rec in _read_jsonl(src / PROBLEMS_FILE)]
     with RunLock(out, what="dataset rereference"):
-        done = _journal(out)
+        done = _read_journal(out / JOURNAL_FILE)
         todo = [rec for rec in records if rec.get("benchmark", True) and not rec.get("trivial")
                 and rec["problem_id"] not in done]
-        budget = search_s + 5.0 * rrt_starts + (1 + rrt_starts) * (3 * polish_s + 2 * trajopt_s + 5.0) + 30.0
+        n_opt = len(TRAJOPT_CONTROL_POINTS)  # per start: a descent, and n_opt optimizations each descended
+        per_start = (1 + n_opt) * polish_s + n_opt * trajopt_s + 5.0
+        budget = search_s + 5.0 * rrt_starts + (1 + rrt_starts) * per_start + 30.0
         work = [Job(rec["problem_id"], search_job,
                     (problem_from_record(rec, scenes[rec["scene_key"]], time_limit_s=search_s), search_s, rrt_starts,
                      polish_s, trajopt_s), 3 * budget + 60, group=rec["scene_key"]) for rec in todo]
-        bar = tqdm(total=len(work), desc="offline search", unit="problem", disable=not progress_bar, file=sys.stderr)
-        if work:
-            ex = LocalExecutor(jobs=min(jobs, len(work)), init=worker_init)
-            with open(out / JOURNAL_FILE, "a") as journal:
-                for outcome in ex.run(work):
-                    res = (outcome.result if outcome.failure is None else
-                           {"best": None, "starts": [], "failure": outcome.failure, "message": outcome.message})
-                    rec = {"problem_id": outcome.job.key, **res}
-                    journal.write(json.dumps(rec) + "\n")
-                    journal.flush()
-                    done[outcome.job.key] = rec
-                    bar.update(1)
-        bar.close()
+        _run_journalled(work, out / JOURNAL_FILE, done, lambda o: {
+            "best": None, "starts": [], "failure": o.failure, "message": o.message},
+            desc="offline search", jobs=jobs, progress_bar=progress_bar)
 
         kept, new_records, pairs = [], [], []
         for rec in records:
@@ -252,9 +274,7 @@ def rereference_dataset(source: str, name: str, *, search_s: float = 20.0, rrt_s
                 "command": " ".join(["python -m suite", *argv]), "git_commit": git_commit(), "versions": versions(),
                 "search_s": search_s, "rrt_starts": rrt_starts, "polish_s": polish_s, "trajopt_s": trajopt_s,
                 "searched": len(pairs) + len(kept), "kept_from_source": sorted(kept),
-                "new_over_old_length_quantiles": {k: round(float(np.quantile(ratio, q)), 4) for k, q in
-                                                  (("min", 0), ("p10", 0.1), ("median", 0.5), ("p90", 0.9),
-                                                   ("max", 1))} if len(ratio) else {},
+                "new_over_old_length_quantiles": _quantiles(ratio),
                 "shorter_than_source": int(np.sum(ratio < 1 - EQUAL_TOLERANCE)),
                 "equal_to_source": int(np.sum(np.abs(ratio - 1) <= EQUAL_TOLERANCE)),
                 "longer_than_source": int(np.sum(ratio > 1 + EQUAL_TOLERANCE)),
@@ -268,9 +288,8 @@ def rereference_dataset(source: str, name: str, *, search_s: float = 20.0, rrt_s
             shutil.copytree(src / "regions", out / "regions")  # same worlds, same regions
         write_dataset_files(out, scene_lines, new_records, new_manifest)
         # the journal keeps what each start gave; the paths are in the problems file now
-        lines = [json.dumps({**r, "best": None if r.get("best") is None else
-                             {k: v for k, v in r["best"].items() if k != "path"}}) for r in done.values()]
-        (out / JOURNAL_FILE).write_text("\n".join(lines) + "\n")
+        _rewrite_journal(out / JOURNAL_FILE, done, lambda r: {**r, "best": None if r.get("best") is None else
+                                                              {k: v for k, v in r["best"].items() if k != "path"}})
         (out / LOCK_FILE).unlink(missing_ok=True)
     return new_manifest
 
@@ -292,12 +311,10 @@ def refine_dataset(name: str, *, polish_s: float = 2.0, trajopt_s: float = TRAJO
     """Run the local optimizers again from every offline-search reference of dataset `name`, in
     place, keeping a result only if it is shorter and certified (a second pass after
     `rereference_dataset`, for a revision not yet shipped). Journalled in refine.jsonl."""
-    from tqdm import tqdm
-
     from suite.run.build_dataset import write_dataset_files
-    from suite.run.executors import Job, LocalExecutor
+    from suite.run.executors import Job
     from suite.run.lock import LOCK_FILE, RunLock
-    from suite.run.runner import git_commit, worker_init
+    from suite.run.runner import git_commit
 
     out = dataset_dir(name)
     manifest = read_manifest(out)
@@ -306,15 +323,8 @@ def refine_dataset(name: str, *, polish_s: float = 2.0, trajopt_s: float = TRAJO
     scenes = {rec["scene_key"]: scene_from_record(rec) for _, _, rec in scene_rows}
     records = [rec for _, _, rec in _read_jsonl(out / PROBLEMS_FILE)]
     with RunLock(out, what="dataset refine"):
-        done = {}
         journal_path = out / REFINE_JOURNAL_FILE
-        if journal_path.exists():
-            for line in journal_path.read_text().splitlines():
-                try:
-                    rec = json.loads(line)
-                except json.JSONDecodeError:
-                    continue
-                done[rec["problem_id"]] = rec
+        done = _read_journal(journal_path)
         todo = [rec for rec in records if rec["reference"].get("planner") == "offline-search"
                 and rec["problem_id"] not in done]
         work = [Job(rec["problem_id"], refine_job,
@@ -322,19 +332,8 @@ def refine_dataset(name: str, *, polish_s: float = 2.0, trajopt_s: float = TRAJO
                      rec["reference"]["path"], polish_s, trajopt_s),
                     3 * (len(TRAJOPT_CONTROL_POINTS) * (trajopt_s + polish_s) + polish_s) + 60,
                     group=rec["scene_key"]) for rec in todo]
-        bar = tqdm(total=len(work), desc="refining", unit="problem", disable=not progress_bar, file=sys.stderr)
-        if work:
-            ex = LocalExecutor(jobs=min(jobs, len(work)), init=worker_init)
-            with open(journal_path, "a") as journal:
-                for outcome in ex.run(work):
-                    res = outcome.result if outcome.failure is None else {"path": None, "how": {
-                        "failure": outcome.failure, "message": outcome.message}}
-                    rec = {"problem_id": outcome.job.key, **res}
-                    journal.write(json.dumps(rec) + "\n")
-                    journal.flush()
-                    done[outcome.job.key] = rec
-                    bar.update(1)
-        bar.close()
+        _run_journalled(work, journal_path, done, lambda o: {"path": None, "how": {
+            "failure": o.failure, "message": o.message}}, desc="refining", jobs=jobs, progress_bar=progress_bar)
         new_records, gains = [], []
         for rec in records:
             found = done.get(rec["problem_id"])
@@ -355,12 +354,9 @@ def refine_dataset(name: str, *, polish_s: float = 2.0, trajopt_s: float = TRAJO
         manifest = {**manifest, "hash": dataset_hash(scene_lines, new_records), "refined": {
             "command": " ".join(["python -m suite", *argv]), "git_commit": git_commit(), "polish_s": polish_s,
             "trajopt_s": trajopt_s, "trajopt_control_points": list(TRAJOPT_CONTROL_POINTS), "tried": len(done),
-            "shortened": len(gains), "new_over_old_length_quantiles": {
-                k: round(float(np.quantile(g, q)), 4) for k, q in
-                (("min", 0), ("p10", 0.1), ("median", 0.5), ("p90", 0.9), ("max", 1))} if len(g) else {},
+            "shortened": len(gains), "new_over_old_length_quantiles": _quantiles(g),
             "total_s": round(time.perf_counter() - t0, 1)}}
         write_dataset_files(out, scene_lines, new_records, manifest)
-        lines = [json.dumps({k: v for k, v in r.items() if k != "path"}) for r in done.values()]
-        journal_path.write_text("\n".join(lines) + "\n")
+        _rewrite_journal(journal_path, done, lambda r: {k: v for k, v in r.items() if k != "path"})
         (out / LOCK_FILE).unlink(missing_ok=True)
     return manifest
