@@ -36,7 +36,7 @@ from pydrake.multibody.tree import SpatialInertia, UnitInertia
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
-from scenes.robot_model import ALWAYS_TOUCHING, IIWA_URDF, WSG_URDF, effort_limits, load_robot
+from scenes.robot_model import effort_limits, load_robot, robot_variant
 from scenes.scene import HeldCan, Scene
 
 RENDERER = "vtk"
@@ -120,10 +120,11 @@ def add_scene_to_plant(
     if mode not in ("sim", "plan"):
         raise ValueError(f"mode must be 'sim' or 'plan', got {mode!r}")
     spec = scene.spec
-    robot = load_robot()
+    robot = load_robot(spec.robot)
+    variant = robot_variant(spec.robot)
     parser = Parser(plant)
-    (iiwa,) = parser.AddModels(str(IIWA_URDF))
-    (wsg,) = parser.AddModels(str(WSG_URDF))
+    (iiwa,) = parser.AddModels(str(variant.iiwa_urdf))
+    (wsg,) = parser.AddModels(str(variant.wsg_urdf))
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("iiwa_link_0", iiwa))
     plant.WeldFrames(
         plant.GetFrameByName("iiwa_link_7", iiwa),
@@ -134,11 +135,13 @@ def add_scene_to_plant(
         opening = spec.grasp.open_width_m if gripper_opening_m is None else gripper_opening_m
         body_frame = plant.GetFrameByName("body", wsg)
         for name, X_GF in robot.finger_offsets(opening).items():
+            if robot.welded_fingers:
+                break  # the model file welds them already
             plant.RemoveJoint(plant.GetJointByName(f"{name}_sliding_joint", wsg))
             plant.WeldFrames(body_frame, plant.GetFrameByName(name, wsg), RigidTransform(X_GF))
 
     if mode == "sim":
-        efforts = effort_limits()
+        efforts = effort_limits(spec.robot)
         for instance in (iiwa, wsg):
             for index in plant.GetJointIndices(instance):
                 joint = plant.get_joint(index)
@@ -189,12 +192,12 @@ def add_scene_to_plant(
 
     plant.Finalize()
     scene_graph.collision_filter_manager().Apply(
-        _filters(plant, iiwa, wsg, plate_body, held_body)
+        _filters(plant, iiwa, wsg, plate_body, held_body, variant.filtered)
     )
     return iiwa, wsg
 
 
-def _filters(plant, iiwa, wsg, plate_body, held_body) -> CollisionFilterDeclaration:
+def _filters(plant, iiwa, wsg, plate_body, held_body, filtered) -> CollisionFilterDeclaration:
     """The filters shared with the python-fcl world (see `scenes.fcl_world`).
 
     Drake itself already filters bodies joined by a joint and bodies welded into one rigid
@@ -206,7 +209,7 @@ def _filters(plant, iiwa, wsg, plate_body, held_body) -> CollisionFilterDeclarat
         instance = iiwa if name.startswith("iiwa_") else wsg
         return plant.CollectRegisteredGeometries([plant.GetBodyByName(name, instance)])
 
-    for a, b in ALWAYS_TOUCHING:
+    for a, b in filtered:  # the robot variant's filtered pairs
         decl.ExcludeBetween(body_set(a), body_set(b))
     if held_body is not None:
         # The held can rests on the plate at the grasp: that contact is allowed (as MoveIt allows

@@ -64,7 +64,7 @@ class CollisionWorld(WorldBuild, MotionChecks):
 
     Args:
         scene: the scene (static boxes from its spec, cans as cylinders).
-        robot: the robot model (the project's own, by default).
+        robot: the robot model (the scene spec's variant, by default).
         gripper_opening_m: finger opening (the spec's open width by default).
         held: a can carried in the gripper; it is part of the robot and not on the plate.
         removed_can_ids: cans no longer on the plate (already recycled).
@@ -89,7 +89,7 @@ class CollisionWorld(WorldBuild, MotionChecks):
     ) -> None:
         self.scene = scene
         self.padding_m = float(padding_m)
-        self.robot = robot = robot or load_robot()
+        self.robot = robot = robot or load_robot(scene.spec.robot)
         spec = scene.spec
         opening = spec.grasp.open_width_m if gripper_opening_m is None else gripper_opening_m
         self.gripper_opening_m = opening

@@ -1,8 +1,8 @@
 """The robot as data, read from the project's own model files, with fast numpy kinematics.
 
-One source of truth: `models/iiwa14.urdf` and `models/wsg50.urdf` are parsed here for the
-kinematic chain, the joint limits and the collision primitives; the Drake scene parses the same
-files. The forward kinematics below serves the python-fcl world and the metrics, where calling
+One source of truth: a robot variant's model files (`ROBOTS`: the project's own `models/iiwa14.urdf`
+and `models/wsg50.urdf` by default) are parsed here for the kinematic chain, the joint limits and
+the collision primitives; the Drake scene parses the same files. The forward kinematics below serves the python-fcl world and the metrics, where calling
 into Drake per configuration would cost more than the computation itself.
 
 Frames: W world (= robot base link_0), L_i link i, G the gripper frame (WSG body: +y from the
@@ -33,6 +33,55 @@ GRIPPER_MOUNT_RPY = (math.pi / 2, 0.0, math.pi / 2)
 #: around joint 7 and so inside the gripper body whatever q7 is; the two fingers are allowed
 #: to meet when the gripper is closed.
 ALWAYS_TOUCHING = (("iiwa_link_6", "body"), ("left_finger", "right_finger"))
+
+
+@dataclasses.dataclass(frozen=True)
+class RobotVariant:
+    """A robot's model files and how the gripper is mounted and filtered.
+
+    Attributes:
+        name: as a scene spec names it (`robot:`).
+        iiwa_urdf, wsg_urdf: the arm's and the gripper's model files.
+        mount_xyz, mount_rpy: the gripper frame G (the WSG body) in link 7's frame.
+        filtered: body pairs never checked against each other, besides adjacent pairs.
+        about: one line: what it is and where its numbers come from.
+    """
+
+    name: str
+    iiwa_urdf: Path
+    wsg_urdf: Path
+    mount_xyz: tuple[float, float, float]
+    mount_rpy: tuple[float, float, float]
+    filtered: tuple[tuple[str, str], ...]
+    about: str
+
+
+DEFAULT_ROBOT = "iiwa14-wsg"
+#: The robot variants a scene may use. The GCS paper's (`iiwa14-spheres`): Drake's sphere model of
+#: the iiwa 14 and the WSG 50 with welded fingers, welded at [0, 0, 0.114] with roll 90 deg, and
+#: Drake's `wrist` group (links 5, 6, 7) filtered (docs/gcs-paper-sources.md sections 1a, 5, 6).
+ROBOTS = {
+    DEFAULT_ROBOT: RobotVariant(
+        DEFAULT_ROBOT, IIWA_URDF, WSG_URDF, GRIPPER_MOUNT_XYZ, GRIPPER_MOUNT_RPY, ALWAYS_TOUCHING,
+        "the project's iiwa 14 (capsules) with a WSG 50 whose fingers slide"),
+    "iiwa14-spheres": RobotVariant(
+        "iiwa14-spheres", MODELS_DIR / "iiwa14_spheres.urdf", MODELS_DIR / "wsg50_welded.urdf",
+        (0.0, 0.0, 0.114), (math.pi / 2, 0.0, 0.0),
+        (("iiwa_link_5", "iiwa_link_7"),),
+        "the GCS paper's: iiwa 14 as a cylinder and 12 spheres, WSG 50 with welded fingers (boxes)"),
+}
+
+
+def robot_variant(name: str) -> RobotVariant:
+    """The variant called `name`.
+
+    Raises:
+        ValueError: naming the bad name and the allowed ones.
+    """
+    try:
+        return ROBOTS[name]
+    except KeyError:
+        raise ValueError(f"robot {name!r} is not a robot variant; allowed: {', '.join(ROBOTS)}") from None
 
 
 def rpy_to_matrix(rpy: tuple[float, float, float] | np.ndarray) -> np.ndarray:
@@ -140,6 +189,10 @@ class RobotModel:
     X_7G: np.ndarray
     X_7F: np.ndarray  # the tool flange in link 7
     filtered_pairs: frozenset[frozenset[str]]
+    #: the variant's name (`ROBOTS`)
+    name: str = DEFAULT_ROBOT
+    #: X_GF of each finger when the fingers are welded (then the opening changes nothing)
+    welded_fingers: tuple[tuple[str, np.ndarray], ...] = ()
 
     @property
     def lower_rad(self) -> np.ndarray:
@@ -203,7 +256,10 @@ class RobotModel:
         return self.link_poses(q)[..., 7, :, :] @ self.X_7F
 
     def finger_offsets(self, opening_m: float) -> dict[str, np.ndarray]:
-        """X_GF for each finger at a given opening (finger inner faces at x = -+opening/2)."""
+        """X_GF for each finger at a given opening (finger inner faces at x = -+opening/2); a
+        welded gripper's fixed poses whatever the opening."""
+        if self.welded_fingers:
+            return {name: X.copy() for name, X in self.welded_fingers}
         out = {}
         for name, sign in (("left_finger", -1.0), ("right_finger", 1.0)):
             X = np.eye(4)
@@ -216,11 +272,12 @@ class RobotModel:
         return rng.uniform(self.lower_rad, self.upper_rad, size=(n, 7))
 
 
-@functools.lru_cache(maxsize=1)
-def effort_limits() -> dict[str, float]:
-    """Every actuated joint's effort limit (N m or N) from the iiwa and WSG model files."""
+@functools.lru_cache(maxsize=None)
+def effort_limits(robot: str = DEFAULT_ROBOT) -> dict[str, float]:
+    """Every actuated joint's effort limit (N m or N) from a robot variant's model files."""
+    v = robot_variant(robot)
     out = {}
-    for path in (IIWA_URDF, WSG_URDF):
+    for path in (v.iiwa_urdf, v.wsg_urdf):
         for j in ET.parse(path).getroot().findall("joint"):
             lim = j.find("limit")
             if j.get("type") != "fixed" and lim is not None and lim.get("effort") is not None:
@@ -228,10 +285,17 @@ def effort_limits() -> dict[str, float]:
     return out
 
 
-def load_robot() -> RobotModel:
-    """Parse the project's iiwa 14 and WSG 50 model files."""
-    iiwa = ET.parse(IIWA_URDF).getroot()
-    wsg = ET.parse(WSG_URDF).getroot()
+@functools.lru_cache(maxsize=None)
+def load_robot(name: str = DEFAULT_ROBOT) -> RobotModel:
+    """Parse a robot variant's iiwa 14 and WSG 50 model files (`ROBOTS`; the project's own by
+    default). One model per variant and process (it is immutable).
+
+    Raises:
+        ValueError: `name` is not a variant.
+    """
+    v = robot_variant(name)
+    iiwa = ET.parse(v.iiwa_urdf).getroot()
+    wsg = ET.parse(v.wsg_urdf).getroot()
     joints = []
     fixed = {}
     for j in iiwa.findall("joint"):
@@ -263,14 +327,22 @@ def load_robot() -> RobotModel:
     body_names = tuple(names) + ("body", "left_finger", "right_finger")
     adjacent = {frozenset((j.parent, j.child)) for j in joints}
     adjacent.add(frozenset(("iiwa_link_7", "body")))
+    welded = []
     for j in wsg.findall("joint"):
-        adjacent.add(frozenset((j.find("parent").get("link"), j.find("child").get("link"))))
-    filtered = adjacent | {frozenset(p) for p in ALWAYS_TOUCHING}
+        parent, child = j.find("parent").get("link"), j.find("child").get("link")
+        adjacent.add(frozenset((parent, child)))
+        if j.get("type") == "fixed":
+            if parent != "body":
+                raise ValueError(f"gripper joint {j.get('name')}: a welded finger must hang on body")
+            welded.append((child, _origin(j.find("origin"))))
+    filtered = adjacent | {frozenset(p) for p in v.filtered}
     return RobotModel(
         joints=tuple(joints),
         shapes=tuple(_shapes(iiwa) + _shapes(wsg)),
         body_names=body_names,
-        X_7G=transform(GRIPPER_MOUNT_XYZ, GRIPPER_MOUNT_RPY),
+        X_7G=transform(v.mount_xyz, v.mount_rpy),
         X_7F=fixed["iiwa_link_ee"][1],
         filtered_pairs=frozenset(filtered),
+        name=v.name,
+        welded_fingers=tuple(welded),
     )

@@ -18,6 +18,7 @@ import yaml
 from pydantic import Field
 
 from scenes.errors import SuiteError
+from scenes.robot_model import DEFAULT_ROBOT, ROBOTS
 from scenes.schema import FieldError, NonNeg, NonNegInt, Pos, PosInt, PosVec3, Rgba, Unit, Vec2, Vec3, load
 
 DEFAULT_SPEC_PATH = Path(__file__).parent / "specs" / "default.yaml"
@@ -101,11 +102,20 @@ class BinSpec:
     outer_size_m: PosVec3
     wall_thickness_m: Pos
     color_rgba: Rgba
+    #: the floor's thickness when it is not the walls' (the GCS paper's bins: 0.015 under 0.05 walls)
+    floor_thickness_m: Pos | None = None
 
     def __post_init__(self):
         inner = min(self.outer_size_m[:2])
         if 2 * self.wall_thickness_m >= inner:
             raise FieldError("wall_thickness_m", f"leaves no room inside the bin: allowed below half of {inner}")
+        if self.floor_thickness_m is not None and self.floor_thickness_m >= self.outer_size_m[2]:
+            raise FieldError("floor_thickness_m", f"{self.floor_thickness_m}: allowed below the bin's height {self.outer_size_m[2]}")
+
+    @property
+    def floor_m(self) -> float:
+        """The floor's thickness (the walls' unless given)."""
+        return self.wall_thickness_m if self.floor_thickness_m is None else self.floor_thickness_m
 
     def boxes(self) -> dict[str, Box]:
         """The bin as five boxes (floor and four walls), keyed by part name."""
@@ -114,7 +124,7 @@ class BinSpec:
         t = self.wall_thickness_m
         c = self.color_rgba
         return {
-            "bin_floor": Box((cx, cy, t / 2), (sx, sy, t), c),
+            "bin_floor": Box((cx, cy, self.floor_m / 2), (sx, sy, self.floor_m), c),
             "bin_wall_xneg": Box((cx - sx / 2 + t / 2, cy, sz / 2), (t, sy, sz), c),
             "bin_wall_xpos": Box((cx + sx / 2 - t / 2, cy, sz / 2), (t, sy, sz), c),
             "bin_wall_yneg": Box((cx, cy - sy / 2 + t / 2, sz / 2), (sx - 2 * t, t, sz), c),
@@ -212,6 +222,13 @@ class SceneSpec:
     #: a family's ranges (a `scenes.families` dataclass) while the station is still to be drawn;
     #: None for a concrete station
     family: Any = None
+    #: the robot variant (`scenes.robot_model.ROBOTS`): the project's own unless a scene reproduces
+    #: another's experiment (`gcs-arm`: the GCS paper's sphere model)
+    robot: str = DEFAULT_ROBOT
+
+    def __post_init__(self):
+        if self.robot not in ROBOTS:
+            raise FieldError("robot", f"{self.robot!r} is not a robot variant; allowed: {', '.join(ROBOTS)}")
 
     @property
     def plate_top_z_m(self) -> float:
@@ -256,6 +273,10 @@ class SceneSpec:
             del d["family"]
         if d["cans"]["placement"] == "random":
             del d["cans"]["placement"]
+        if d["robot"] == DEFAULT_ROBOT:
+            del d["robot"]
+        if d["bin"]["floor_thickness_m"] is None:
+            del d["bin"]["floor_thickness_m"]
         return d
 
 
@@ -286,7 +307,8 @@ def parse_spec(raw: Any, *, variant: str, source: str | None = None) -> SceneSpe
     where = f"scene spec {source}: " if source else "scene spec "
     if not isinstance(raw, dict):
         raise SuiteError(f"{where}must be a YAML mapping at the top level")
-    top = {"table", "plate", "bin", "can", "cans", "grasp", "waypoints", "cameras", "variants", "families"}
+    top = {"table", "plate", "bin", "can", "cans", "grasp", "waypoints", "cameras", "variants", "families",
+           "extra", "robot"}
     unknown = set(raw) - top
     if unknown:
         raise SuiteError(f"{where}field '{sorted(unknown)[0]}' is unknown; allowed: {sorted(top)}")

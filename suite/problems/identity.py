@@ -21,15 +21,17 @@ import numpy as np
 
 from planners.base import PlanningProblem
 from scenes.identity_rule import CURRENT_RULE, hashed_list, hashed_scalar
+from scenes.robot_model import DEFAULT_ROBOT
 
 
-@functools.lru_cache(maxsize=1)
-def robot_hash() -> str:
-    """Hash of the robot and gripper model files (part of every problem's world)."""
-    from scenes.robot_model import IIWA_URDF, WSG_URDF
+@functools.lru_cache(maxsize=None)
+def robot_hash(robot: str = DEFAULT_ROBOT) -> str:
+    """Hash of a robot variant's arm and gripper model files (part of every problem's world)."""
+    from scenes.robot_model import robot_variant
 
+    v = robot_variant(robot)
     h = hashlib.sha256()
-    for path in (IIWA_URDF, WSG_URDF):
+    for path in (v.iiwa_urdf, v.wsg_urdf):
         h.update(path.read_bytes())
     return h.hexdigest()[:16]
 
@@ -47,7 +49,7 @@ def world_content(problem: PlanningProblem, *, rule: str = CURRENT_RULE) -> dict
     if problem.held is not None:
         held = {"X_GC": r(problem.held.X_GC), "margin_m": spec.grasp.held_margin_m}
     return {
-        "robot": robot_hash(),
+        "robot": robot_hash(spec.robot),
         "obstacles": [{"shape": o.shape, "size_m": r(o.size_m), "X_WO": r(o.X_WO),
                        "rests_held_can": o.name == "plate"} for o in spec.obstacles()],
         "can": [spec.can.radius_m, spec.can.height_m],

@@ -87,7 +87,6 @@ def plot_gripper_paths(
     """The gripper's paths (forward kinematics of the saved joint paths) over one scene: top and side view."""
     from scenes.robot_model import load_robot
 
-    robot = load_robot()
     colors = planner_colors(planners)
     scene_recs = [r for r in records if int(r["scene_seed"]) == scene_seed and r["variant"] == variant]
     key = next((r.get("scene_key") for r in scene_recs if r.get("scene_key")), None)
@@ -100,6 +99,7 @@ def plot_gripper_paths(
         spec = dataclasses.replace(spec, family=None)
     else:
         spec, cans = scene.spec, scene.cans
+    robot = load_robot(spec.robot)  # the gripper's mount is the scene's robot's
     fig, (ax_top, ax_side) = plt.subplots(1, 2, figsize=(13, 6.2), gridspec_kw={"width_ratios": [1, 1.15]})
     _draw_scene(ax_top, spec, cans, dims=(0, 1))
     _draw_scene(ax_side, spec, cans, dims=(1, 2))

@@ -29,19 +29,21 @@ Q_RAISED = np.array([-0.5, -0.2, 0.3, -1.0, 0.2, 1.2, 0.5])
 
 @functools.lru_cache(maxsize=None)
 def _setup(variant: str):
-    """A 5-can scene, its python-fcl world and Drake's collision checker (built once per variant)."""
-    scene = generate_scene(load_spec(variant=variant).with_can_count(5), seed=0)
+    """A 5-can scene (`gcs-arm`: none, as the paper's), its python-fcl world and Drake's collision
+    checker (built once per variant)."""
+    spec = load_spec(variant=variant)
+    scene = generate_scene(spec if variant == "gcs-arm" else spec.with_can_count(5), seed=0)
     return scene, CollisionWorld(scene), drake_checker(scene)
 
 
-def _drake_env_distance(checker, q) -> float:
+def _drake_env_distance(checker, q, fixed_links=("iiwa_link_0", "iiwa_link_1")) -> float:
     """Drake's signed distance between the robot and the environment (negative in penetration)."""
     from pydrake.planning import RobotCollisionType
 
     rc = checker.CalcRobotClearance(q, 10.0)
     plant = checker.plant()
     # Links whose distance to the scene does not depend on q are not part of the clearance.
-    fixed = {plant.GetBodyByName(n).index() for n in ("iiwa_link_0", "iiwa_link_1")}
+    fixed = {plant.GetBodyByName(n).index() for n in fixed_links}
     return min(
         d
         for d, t, b in zip(rc.distances(), rc.collision_types(), rc.robot_indices())
@@ -54,7 +56,7 @@ def _drake_min_distance(checker, q) -> float:
     return float(np.min(checker.CalcRobotClearance(q, 10.0).distances()))
 
 
-@pytest.mark.parametrize("variant", ["open", "wall"])
+@pytest.mark.parametrize("variant", ["open", "wall", "gcs-arm"])
 def test_is_free_agrees_with_drake(variant):
     scene, world, checker = _setup(variant)
     Q = world.robot.random_configurations(np.random.default_rng(100), AGREEMENT_CONFIGS)
@@ -74,12 +76,14 @@ def test_is_free_agrees_with_drake(variant):
     assert world.first_collision(Q[ours]) == -1
 
 
-@pytest.mark.parametrize("variant", ["open", "wall"])
+@pytest.mark.parametrize("variant", ["open", "wall", "gcs-arm"])
 def test_clearance_matches_drake_signed_distance(variant):
     scene, world, checker = _setup(variant)
     Q = world.robot.random_configurations(np.random.default_rng(101), 60)
     ours = world.clearances(Q)
-    drake = np.array([_drake_env_distance(checker, q) for q in Q])
+    # The paper's link 1 is a sphere off joint 1's axis: its distance to the scene depends on q1.
+    fixed = ("iiwa_link_0",) if world.robot.name == "iiwa14-spheres" else ("iiwa_link_0", "iiwa_link_1")
+    drake = np.array([_drake_env_distance(checker, q, fixed) for q in Q])
     assert (ours > 0).any() and (ours < 0).any()  # free and penetrating configurations
     np.testing.assert_allclose(ours, drake, rtol=0, atol=1e-3)
 

@@ -57,3 +57,46 @@ def test_batched_link_poses_equal_single(robot):
     for q, X_m in zip(Q, X):
         np.testing.assert_array_equal(robot.link_poses(q), X_m)
     np.testing.assert_array_equal(robot.gripper_pose(Q), X[:, 8])
+
+
+def test_the_gcs_papers_robot_has_our_chain_its_mount_and_its_spheres(robot):
+    """`iiwa14-spheres` (docs/gcs-paper-sources.md): the same iiwa 14 kinematics, the WSG body at
+    [0, 0, 0.114] with roll 90 deg on link 7, a cylinder and 12 spheres on the arm, the fingers
+    welded whatever the opening, and links 5 and 7 filtered as Drake's `wrist` group."""
+    paper = load_robot("iiwa14-spheres")
+    q = robot.random_configurations(np.random.default_rng(13), 5)
+    np.testing.assert_array_equal(paper.link_poses(q)[:, :8], robot.link_poses(q)[:, :8])
+    X_7G = np.array([[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0.114], [0, 0, 0, 1.0]])
+    np.testing.assert_allclose(paper.X_7G, X_7G, atol=1e-12)
+    arm = [s for s in paper.shapes if s.body.startswith("iiwa_")]
+    assert [s.kind for s in arm].count("sphere") == 12 and [s.kind for s in arm].count("cylinder") == 1
+    assert {name for name, _ in paper.welded_fingers} == {"left_finger", "right_finger"}
+    a, b = paper.finger_offsets(0.0), paper.finger_offsets(0.1)
+    for name in a:
+        np.testing.assert_array_equal(a[name], b[name])
+    np.testing.assert_allclose(a["right_finger"][:3, 3], [0.06, 0.077133, 0.0])
+    assert frozenset(("iiwa_link_5", "iiwa_link_7")) in paper.filtered_pairs
+    assert frozenset(("iiwa_link_5", "iiwa_link_7")) not in robot.filtered_pairs
+    with pytest.raises(ValueError, match="'nope' is not a robot variant; allowed: iiwa14-wsg, iiwa14-spheres"):
+        load_robot("nope")
+
+
+def test_the_gcs_papers_robot_matches_drake():
+    from scenes.drake_scene import build_drake_scene
+    from scenes.generate import generate_scene
+    from scenes.spec import load_spec
+
+    scene = generate_scene(load_spec(variant="gcs-arm"), seed=0)
+    paper = load_robot("iiwa14-spheres")
+    ds = build_drake_scene(scene, mode="plan", cameras=False)
+    plant = ds.plant
+    assert plant.num_positions() == 7
+    context = plant.CreateDefaultContext()
+    names = [("body", ds.wsg), ("left_finger", ds.wsg), ("right_finger", ds.wsg)]
+    for q in paper.random_configurations(np.random.default_rng(14), 10):
+        plant.SetPositions(context, q)
+        X_WG = paper.gripper_pose(q)
+        for name, instance in names:
+            X = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName(name, instance)).GetAsMatrix4()
+            X_GF = np.eye(4) if name == "body" else paper.finger_offsets(0.0)[name]
+            np.testing.assert_allclose(X, X_WG @ X_GF, rtol=0, atol=1e-6)

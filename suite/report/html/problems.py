@@ -199,11 +199,13 @@ def drawing_json(problems: Sequence[Problem], *, planners: Sequence[str], world:
     """Everything the browser draws: scenes by key, and per problem its cans, held can, endpoints and paths."""
     from scenes.robot_model import load_robot
 
-    robot = load_robot()
+    default = load_robot()
     used = {p.first.get("scene_key") for p in problems}
     scenes = {k: scene_json(s) for k, s in world.scenes.items() if k in used}
     out: dict[str, Any] = {}
     for p in problems:
+        drawn = world.scenes.get(p.first.get("scene_key"))
+        robot = load_robot(drawn.spec.robot) if drawn is not None else default  # the gripper's mount differs
         q0, q1 = (np.asarray(p.first[f], float) if p.first.get(f) else None for f in ("q_start", "q_goal"))
         entry: dict[str, Any] = {"scene": p.first.get("scene_key") if p.first.get("scene_key") in scenes else None,
                                  "paths": {}}
@@ -228,4 +230,4 @@ def drawing_json(problems: Sequence[Problem], *, planners: Sequence[str], world:
                 entry["paths"][planner] = path_json(q, robot)
         out[p.pid] = entry
     return {"scenes": scenes, "problems": out,
-            "limits": {"lo": _mm(robot.lower_rad), "hi": _mm(robot.upper_rad)}}
+            "limits": {"lo": _mm(default.lower_rad), "hi": _mm(default.upper_rad)}}
