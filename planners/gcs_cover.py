@@ -24,7 +24,12 @@ strategies here start from the arm's configurations at those gripper poses:
   regions until the estimated coverage of that distribution reaches `coverage` or the regions
   their cap.
 
-Both are built per world, offline; what a problem adds (joining its own start and goal to these
+A scene that declares its own hand-placed seeds (`SceneSpec.region_seeds`, the GCS paper's scene
+`gcs-arm`) gets one region per seed instead, as the paper grew them (`scene_seeds`): its gripper
+poses solved by the paper's IK recipe, its joint-space seeds as given. They are the scene's, like
+the waypoints, not any problem's.
+
+All are built per world, offline; what a problem adds (joining its own start and goal to these
 regions) is done online by `planners.gcs`, inside its planning time.
 """
 
@@ -50,6 +55,26 @@ def _between(X_a: np.ndarray, X_b: np.ndarray, n: int) -> list[np.ndarray]:
 
     traj = PiecewisePose.MakeLinear([0.0, 1.0], [RigidTransform(X_a), RigidTransform(X_b)])
     return [traj.GetPose(k / (n + 1)).GetAsMatrix4() for k in range(1, n + 1)]
+
+
+def scene_seeds(problem) -> tuple[list[tuple[str, np.ndarray]], dict]:
+    """The scene's hand-placed region seeds (`SceneSpec.region_seeds`) as named configurations:
+    its gripper poses by the GCS paper's IK recipe (`scenes.ik.paper_ik`, from its `q0_rad`), then
+    its joint-space seeds. A seed whose IK fails or that collides in the problem's world is left
+    out and named in `info["seeds_dropped"]`."""
+    from planners.worlds import drake_plan_scene, planning_world
+    from scenes.ik import paper_ik
+    from scenes.robot_model import transform
+
+    spec = problem.scene.spec.region_seeds
+    world = planning_world(problem)
+    t0 = time.perf_counter()
+    ds = drake_plan_scene(problem)
+    named = [(n, paper_ik(ds, transform(p.p_m, p.rpy_rad), spec.q0_rad)) for n, p in spec.poses.items()]
+    named += [(n, np.asarray(q, float)) for n, q in spec.joints_rad.items()]
+    kept = [(n, q) for n, q in named if q is not None and world.is_free(q)]
+    return kept, {"seeds_from": "scene", "ik_s": time.perf_counter() - t0, "seeds": [n for n, _ in kept],
+                  "seeds_dropped": [n for n, q in named if q is None or not world.is_free(q)]}
 
 
 def task_chain(problem, *, seed: int, rrt_time_s: float = 2.0) -> tuple[np.ndarray | None, dict]:

@@ -312,13 +312,21 @@ def grow_for_world(rs: RegionSet, problem, builder: RegionBuilder) -> dict:
     never from the problem's start, goal or paths; then solve GCS between the chain's ends, check
     its path with the python-fcl world and cut what collides (`checked_path`). Returns the build's
     figures (chain, regions, seconds)."""
-    from planners.gcs_cover import chain_seeds, clique_seeds, free_task_samples, task_chain
+    from planners.gcs_cover import chain_seeds, clique_seeds, free_task_samples, scene_seeds, task_chain
     from planners.worlds import planning_world
 
     o = builder.options
     t0 = time.perf_counter()
     world = planning_world(problem)
-    chain, info = task_chain(problem, seed=o.random_seed, rrt_time_s=o.guide_rrt_time_s)
+    if problem.scene.spec.region_seeds is not None:  # the scene's own hand-placed seeds
+        chain, info = None, {}
+        named, info = scene_seeds(problem)
+        for _, q in named:
+            _add_region(rs, builder, world, q)
+        update_edges(rs, 0)
+        info["edges"] = len(rs.edges) // 2
+    else:
+        chain, info = task_chain(problem, seed=o.random_seed, rrt_time_s=o.guide_rrt_time_s)
     if chain is not None:
         ends = (chain[0], chain[-1])
         info["chain_rad"] = float(np.sum(np.linalg.norm(np.diff(chain, axis=0), axis=1)))

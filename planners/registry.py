@@ -25,6 +25,8 @@ BUILTIN = {
     "bitstar": "planners.ompl_rrt:BITstarPlanner",
     "aorrtc": "planners.ompl_rrt:AORRTCPlanner",
     "prm": "planners.ompl_rrt:PRMPlanner",
+    "prm-roadmap": "planners.ompl_roadmap:PRMRoadmapPlanner",
+    "prm-roadmap-shortcut": "planners.ompl_roadmap:ShortcutPRMRoadmapPlanner",
     "trajopt": "planners.trajopt:TrajoptPlanner",
     "gcs": "planners.gcs:GcsPlanner",
     "roboplan-rrt": "planners.roboplan_rrt:RoboplanRRTPlanner",

@@ -91,3 +91,32 @@ class PoseIk:
                 if i < n_near:
                     break  # the seed or a seed near it: on q_seed's branch
         return best
+
+
+#: The GCS paper's IK recipe (gcs-science-robotics reproduction/prm_comparison/helpers.py): the
+#: gripper frame's origin exactly at the target, its orientation within 1 mrad, the cost
+#: |q - q0|^2, q0 as the initial guess, no collision constraint, Drake's default solver.
+PAPER_ORIENTATION_TOLERANCE_RAD = 1e-3
+
+
+def paper_ik(drake_scene, X_WG: np.ndarray, q0: np.ndarray) -> np.ndarray | None:
+    """The configuration the GCS paper's IK recipe gives for gripper pose X_WG, or None if the
+    solver fails. Deterministic (one solve from q0)."""
+    from pydrake.solvers import Solve
+
+    plant = drake_scene.plant
+    context = plant.CreateDefaultContext()
+    G = plant.GetFrameByName("body", drake_scene.wsg)
+    X = RigidTransform(np.asarray(X_WG, float))
+    ik = InverseKinematics(plant, context)
+    q = ik.q()
+    p = X.translation()
+    ik.AddPositionConstraint(G, np.zeros(3), plant.world_frame(), p, p)
+    ik.AddOrientationConstraint(G, RotationMatrix(), plant.world_frame(), X.rotation(),
+                                PAPER_ORIENTATION_TOLERANCE_RAD)
+    prog = ik.get_mutable_prog()
+    q0 = np.asarray(q0, float)
+    prog.AddQuadraticErrorCost(np.eye(len(q0)), q0, q)
+    prog.SetInitialGuess(q, q0)
+    result = Solve(prog)
+    return np.asarray(result.GetSolution(q), float) if result.is_success() else None

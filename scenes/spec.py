@@ -203,6 +203,31 @@ class CameraSpec:
             raise FieldError("clipping_m", "allowed: [near, far] with near < far")
 
 
+Vec7 = tuple[float, float, float, float, float, float, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class SeedPose:
+    """A gripper pose: position (m) and roll-pitch-yaw (rad, fixed axes x, y, z) of the gripper
+    frame G in the world."""
+
+    p_m: Vec3
+    rpy_rad: Vec3
+
+
+@dataclasses.dataclass(frozen=True)
+class RegionSeeds:
+    """A scene's own seeds for `gcs`'s regions, placed by hand as the GCS paper placed its eight:
+    gripper poses (solved by the paper's IK recipe, `scenes.ik.paper_ik`: exact position,
+    orientation within 1 mrad, nearest to `q0_rad`) and joint-space configurations. They belong
+    to the scene, like its task waypoints, not to any problem.
+    """
+
+    q0_rad: Vec7
+    poses: dict[str, SeedPose]
+    joints_rad: dict[str, Vec7]
+
+
 @dataclasses.dataclass(frozen=True)
 class SceneSpec:
     """Everything static about a scene; with a seed it fully determines a `Scene`."""
@@ -225,6 +250,8 @@ class SceneSpec:
     #: the robot variant (`scenes.robot_model.ROBOTS`): the project's own unless a scene reproduces
     #: another's experiment (`gcs-arm`: the GCS paper's sphere model)
     robot: str = DEFAULT_ROBOT
+    #: hand-placed seeds of `gcs`'s regions (None: regions grow along the task chain)
+    region_seeds: RegionSeeds | None = None
 
     def __post_init__(self):
         if self.robot not in ROBOTS:
@@ -275,6 +302,8 @@ class SceneSpec:
             del d["cans"]["placement"]
         if d["robot"] == DEFAULT_ROBOT:
             del d["robot"]
+        if d["region_seeds"] is None:
+            del d["region_seeds"]
         if d["bin"]["floor_thickness_m"] is None:
             del d["bin"]["floor_thickness_m"]
         return d
@@ -308,7 +337,7 @@ def parse_spec(raw: Any, *, variant: str, source: str | None = None) -> SceneSpe
     if not isinstance(raw, dict):
         raise SuiteError(f"{where}must be a YAML mapping at the top level")
     top = {"table", "plate", "bin", "can", "cans", "grasp", "waypoints", "cameras", "variants", "families",
-           "extra", "robot"}
+           "extra", "robot", "region_seeds"}
     unknown = set(raw) - top
     if unknown:
         raise SuiteError(f"{where}field '{sorted(unknown)[0]}' is unknown; allowed: {sorted(top)}")

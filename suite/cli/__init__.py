@@ -30,6 +30,7 @@ COMMANDS = {
     "export": ("suite.cli.export", "write a dataset's problems as files any planner can read (problems, schema, URDFs)"),
     "import": ("suite.cli.import_", "judge an external planner's paths like a suite trial and add them as records"),
     "regions": ("suite.cli.regions", "build gcs's collision-free convex regions of a dataset's worlds ahead (cached)"),
+    "paper": ("suite.cli.paper", "reproduce a published experiment on the suite's planners (gcs-arm: the GCS paper's arm)"),
     "bench": ("suite.cli.bench", "print speed figures (collision, perception, planners)"),
     "docs": ("suite.cli.docs", "rewrite the figures of README.md and docs/ from the committed files they come from"),
 }

@@ -1,0 +1,49 @@
+"""The GCS paper's arm experiment: its poses by its IK recipe, and the exact GCS optimum by enumeration."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from suite.paper.gcs_arm import TASK_POSES, _restriction_cost, region_paths, task_configurations
+
+
+def test_the_task_poses_are_reached_by_the_papers_ik_recipe():
+    from scenes.fcl_world import CollisionWorld
+    from scenes.robot_model import load_robot, rpy_to_matrix
+    from suite.paper.gcs_arm import paper_scene
+
+    scene = paper_scene()
+    q = task_configurations(scene)
+    robot = load_robot("iiwa14-spheres")
+    world = CollisionWorld(scene)
+    for name, (p, rpy) in TASK_POSES.items():
+        X = robot.gripper_pose(q[name])
+        np.testing.assert_allclose(X[:3, 3], p, atol=1e-6)
+        R = X[:3, :3].T @ rpy_to_matrix(rpy)
+        angle = np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))
+        assert angle <= 1e-3 + 1e-6
+        assert world.is_free(q[name])
+
+
+def test_region_paths_are_every_simple_path():
+    edges = [(0, 1), (1, 0), (1, 2), (2, 1), (0, 2), (2, 0), (2, 3), (3, 2)]
+    paths = region_paths(edges, [0], [3])
+    assert sorted(paths) == [[0, 1, 2, 3], [0, 2, 3]]
+
+
+def test_the_restriction_is_the_shortest_path_through_its_regions():
+    """An L-shaped corridor of two boxes in the plane: from s in the first to g in the second the
+    shortest path bends at the inner corner (0.2, 0.2) of their overlap."""
+    def box(lo, hi):
+        A = np.vstack([np.eye(2), -np.eye(2)])
+        return A, np.concatenate([hi, -np.asarray(lo)])
+
+    (A0, b0), (A1, b1) = box([0, 0], [1, 0.2]), box([0, 0], [0.2, 1])
+    s, g = np.array([1.0, 0.1]), np.array([0.1, 1.0])
+    corner = np.array([0.2, 0.2])
+    expected = np.linalg.norm(corner - s) + np.linalg.norm(g - corner)
+    assert _restriction_cost([0, 1], s, g, [A0, A1], [b0, b1]) == pytest.approx(expected, rel=1e-5)
+    # a single region holding both ends: the straight segment
+    (A2, b2) = box([0, 0], [1, 1])
+    assert _restriction_cost([0], s, g, [A2], [b2]) == pytest.approx(np.linalg.norm(g - s), rel=1e-9)
