@@ -38,31 +38,27 @@ SAMPLING_RULE = ("steps = max(1, ceil(max_j |b_j - a_j| / resolution_rad)); stat
 FINGER_JOINTS = ("left_finger_sliding_joint", "right_finger_sliding_joint")
 
 
-def combined_urdf(*, capsules: bool = False) -> str:
+def combined_urdf(*, capsules: bool = False, robot: str | None = None) -> str:
     """The iiwa URDF with the WSG's links and joints added and a fixed joint mounting the gripper
-    frame ('body') on iiwa_link_7 at the suite's mount pose.
+    frame ('body') on iiwa_link_7 at the robot variant's mount pose.
 
     Args:
         capsules: keep the suite's `<capsule>` elements (Drake reads them; urdfdom-based parsers,
             e.g. Pinocchio's, MoveIt's, drop the whole element). By default each capsule is
             written as the same solid in standard URDF: a cylinder and a sphere at each end.
+        robot: the robot variant (`scenes.robot_model.ROBOTS`; the suite's own by default).
     """
-    from scenes.robot_model import (
-        DRAKE_NS,
-        GRIPPER_MOUNT_RPY,
-        GRIPPER_MOUNT_XYZ,
-        IIWA_URDF,
-        WSG_URDF,
-    )
+    from scenes.robot_model import DEFAULT_ROBOT, DRAKE_NS, robot_variant
 
+    v = robot_variant(robot or DEFAULT_ROBOT)
     ET.register_namespace("drake", DRAKE_NS.strip("{}"))
-    iiwa = ET.parse(IIWA_URDF).getroot()
-    wsg = ET.parse(WSG_URDF).getroot()
+    iiwa = ET.parse(v.iiwa_urdf).getroot()
+    wsg = ET.parse(v.wsg_urdf).getroot()
     iiwa.set("name", "iiwa14_wsg50")
     mount = ET.SubElement(iiwa, "joint", {"name": "iiwa_joint_gripper", "type": "fixed"})
     ET.SubElement(mount, "parent", {"link": "iiwa_link_7"})
     ET.SubElement(mount, "child", {"link": "body"})
-    ET.SubElement(mount, "origin", {"xyz": _floats(GRIPPER_MOUNT_XYZ), "rpy": _floats(GRIPPER_MOUNT_RPY)})
+    ET.SubElement(mount, "origin", {"xyz": _floats(v.mount_xyz), "rpy": _floats(v.mount_rpy)})
     for child in wsg:
         iiwa.append(child)
     if not capsules:
@@ -76,8 +72,9 @@ def combined_urdf(*, capsules: bool = False) -> str:
                             link.insert(index + k, part)
     ET.indent(iiwa)
     how = "capsules kept as <capsule>" if capsules else "each <capsule> written as a cylinder and two end spheres"
-    return ('<?xml version="1.0"?>\n<!-- Written by `python -m suite export`: the suite\'s iiwa14.urdf with '
-            f'wsg50.urdf mounted on iiwa_link_7 (gripper frame G = link "body"); {how}. -->\n'
+    return ('<?xml version="1.0"?>\n<!-- Written by `python -m suite export`: the suite\'s '
+            f'{v.iiwa_urdf.name} with {v.wsg_urdf.name} mounted on iiwa_link_7 (gripper frame G = link "body"); '
+            f'{how}. -->\n'
             + ET.tostring(iiwa, encoding="unicode") + "\n")
 
 
@@ -124,11 +121,14 @@ def _pose(X) -> list:
 
 
 def _robot_section(problem: PlanningProblem, robot) -> dict[str, Any]:
+    from scenes.robot_model import robot_variant
+
     half = problem.gripper_opening_m / 2
+    v = robot_variant(robot.name)
     return {
         "urdf": f"{ROBOT_DIR}/{COMBINED_URDF}",
         "urdf_with_capsules": f"{ROBOT_DIR}/{CAPSULE_URDF}",
-        "model_files": [f"{ROBOT_DIR}/iiwa14.urdf", f"{ROBOT_DIR}/wsg50.urdf"],
+        "model_files": [f"{ROBOT_DIR}/{v.iiwa_urdf.name}", f"{ROBOT_DIR}/{v.wsg_urdf.name}"],
         "joint_names": [j.name for j in robot.joints],
         "lower_rad": robot.lower_rad.tolist(),
         "upper_rad": robot.upper_rad.tolist(),
@@ -136,7 +136,8 @@ def _robot_section(problem: PlanningProblem, robot) -> dict[str, Any]:
         "acceleration_rad_s2": robot.acceleration_limits_rad_s2.tolist(),
         "X_WB": _pose(np.eye(4)),  # the base link is the world frame
         "gripper_frame": "body",
-        "finger_positions_m": {FINGER_JOINTS[0]: -half, FINGER_JOINTS[1]: half},
+        # a gripper whose fingers are welded (the GCS paper's) has no finger joints to hold
+        "finger_positions_m": {} if robot.welded_fingers else {FINGER_JOINTS[0]: -half, FINGER_JOINTS[1]: half},
     }
 
 
@@ -240,10 +241,13 @@ def write_export(dataset_arg: str, out: str | Path, *, time_limit_s: float) -> d
     Raises:
         SuiteError: unknown dataset or tier, or `out` already holds an export or is not writable.
     """
-    from scenes.robot_model import IIWA_URDF, WSG_URDF, load_robot
+    from scenes.robot_model import load_robot, robot_variant
     from suite.problems.dataset import load_dataset, parse_dataset_arg
 
     ds = load_dataset(dataset_arg, time_limit_s=time_limit_s)
+    robots = sorted({p.scene.spec.robot for p in ds.problems})
+    if len(robots) > 1:
+        raise SuiteError(f"dataset {dataset_arg!r} mixes robot variants {robots}; an export holds one robot")
     out = Path(out)
     if (out / PROBLEMS_FILE).exists():
         raise SuiteError(f"--out {str(out)!r} already holds an export ({PROBLEMS_FILE}); choose another directory")
@@ -251,13 +255,14 @@ def write_export(dataset_arg: str, out: str | Path, *, time_limit_s: float) -> d
         (out / ROBOT_DIR).mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise SuiteError(f"--out {str(out)!r} is not writable: {exc.strerror}") from None
-    robot = load_robot()
+    robot = load_robot(robots[0]) if robots else load_robot()
+    v = robot_variant(robot.name)
     name, tier = parse_dataset_arg(dataset_arg)
     label = f"{name}:{tier}"
-    for path in (IIWA_URDF, WSG_URDF):
+    for path in (v.iiwa_urdf, v.wsg_urdf):
         shutil.copyfile(path, out / ROBOT_DIR / path.name)
-    (out / ROBOT_DIR / COMBINED_URDF).write_text(combined_urdf())
-    (out / ROBOT_DIR / CAPSULE_URDF).write_text(combined_urdf(capsules=True))
+    (out / ROBOT_DIR / COMBINED_URDF).write_text(combined_urdf(robot=robot.name))
+    (out / ROBOT_DIR / CAPSULE_URDF).write_text(combined_urdf(capsules=True, robot=robot.name))
     (out / SCHEMA_FILE).write_text(json.dumps(schema_document(), indent=1) + "\n")
     with open(out / PROBLEMS_FILE, "w") as f:
         f.writelines(json.dumps(problem_entry(problem, ds.meta[pid], dataset=label, robot=robot,
@@ -266,10 +271,11 @@ def write_export(dataset_arg: str, out: str | Path, *, time_limit_s: float) -> d
     manifest = {"format_version": FORMAT_VERSION, "dataset": {"name": name, "tier": tier, "hash": ds.hash},
                 "problems": len(ds.ids), "time_limit_s": time_limit_s,
                 "files": [PROBLEMS_FILE, SCHEMA_FILE, README_FILE,
-                          *(f"{ROBOT_DIR}/{p}" for p in ("iiwa14.urdf", "wsg50.urdf", COMBINED_URDF, CAPSULE_URDF))]}
+                          *(f"{ROBOT_DIR}/{p}" for p in (v.iiwa_urdf.name, v.wsg_urdf.name, COMBINED_URDF, CAPSULE_URDF))]}
     (out / EXPORT_MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
     (out / README_FILE).write_text(EXPORT_README.format(dataset=label, n=len(ds.ids), time_limit_s=time_limit_s,
-                                                        name=name))
+                                                        name=name, iiwa=v.iiwa_urdf.name, wsg=v.wsg_urdf.name,
+                                                        about=v.about))
     return manifest
 
 
@@ -301,8 +307,9 @@ validator, TOPP-RA timing and metrics, beside the suite's planners.
   suite's links are capsules, each written here as the same solid: a cylinder and a sphere at
   each end). `robot/iiwa14_wsg50_capsules.urdf` keeps the `<capsule radius length>` elements
   (Drake reads them; urdfdom-based parsers drop such an element without failing).
-  The finger joints are prismatic; hold them at `robot.finger_positions_m` during the motion.
-  `robot/iiwa14.urdf` and `robot/wsg50.urdf` are the suite's own files.
+  The finger joints are prismatic; hold them at `robot.finger_positions_m` during the motion
+  (empty when the fingers are welded). The robot is {about}; `robot/{iiwa}` and `robot/{wsg}`
+  are the suite's own files.
 
 ## What counts as a solution
 

@@ -56,3 +56,21 @@ def test_malformed_yaml():
 def test_missing_file():
     with pytest.raises(SuiteError, match="cannot read scene spec"):
         load_spec("/nonexistent/spec.yaml")
+
+
+def test_a_scene_names_its_robot_and_the_default_hashes_as_before():
+    """`robot:` picks a robot variant; left at the project's own (and with no hand seeds and the
+    bin's floor as thick as its walls), the spec's dict has none of the new fields, so every
+    existing scene key and problem id stays as it was."""
+    raw = yaml.safe_load(DEFAULT_SPEC_PATH.read_text())
+    open_spec = load_spec(variant="open")
+    assert open_spec.robot == "iiwa14-wsg"
+    d = open_spec.to_dict()
+    assert "robot" not in d and "region_seeds" not in d and "floor_thickness_m" not in d["bin"]
+    paper = load_spec(variant="gcs-arm")
+    assert paper.robot == "iiwa14-spheres" and paper.to_dict()["robot"] == "iiwa14-spheres"
+    assert len(paper.region_seeds.poses) == 5 and len(paper.region_seeds.joints_rad) == 3
+    assert paper.static_boxes()["bin_floor"].size_m[2] == 0.015
+    raw["variants"]["open"] = {"robot": "ur5"}
+    with pytest.raises(SuiteError, match="robot.*'ur5' is not a robot variant; allowed: iiwa14-wsg, iiwa14-spheres"):
+        loads_spec(yaml.safe_dump(raw), variant="open")
