@@ -93,7 +93,8 @@ def task_label(a: str, b: str) -> str:
 def task_problems(scene=None, *, time_limit_s: float = 5.0, reverses: bool = True) -> list[tuple[str, Any]]:
     """(label, PlanningProblem) for the five tasks (then their reverses): free-space transits
     between the IK configurations, with the straight gripper-pose interpolation between the two
-    poses as their task waypoints."""
+    poses as their task waypoints. No can is picked: `can_id` numbers the task (0-9), since a
+    trial is identified by its scene, can and kind."""
     from planners.base import PlanningProblem, TaskWaypoint
     from scenes.robot_model import load_robot
 
@@ -102,10 +103,10 @@ def task_problems(scene=None, *, time_limit_s: float = 5.0, reverses: bool = Tru
     robot = load_robot(scene.spec.robot)
     pairs = list(TASKS) + ([(b, a) for a, b in TASKS] if reverses else [])
     out = []
-    for a, b in pairs:
+    for k, (a, b) in enumerate(pairs):
         X_a, X_b = robot.gripper_pose(q[a]), robot.gripper_pose(q[b])
         out.append((task_label(a, b), PlanningProblem(
-            kind="transit", scene=scene, can_id=0, q_start=q[a].copy(), q_goal=q[b].copy(), X_WG_goal=X_b,
+            kind="transit", scene=scene, can_id=k, q_start=q[a].copy(), q_goal=q[b].copy(), X_WG_goal=X_b,
             waypoints=(TaskWaypoint(TASK_SPAN_TU[0], X_a), TaskWaypoint(TASK_SPAN_TU[1], X_b)),
             held=None, gripper_opening_m=scene.spec.grasp.open_width_m, removed_can_ids=(),
             time_limit_s=time_limit_s, seed=0)))

@@ -340,3 +340,30 @@ def test_a_claim_over_the_judges_limit_is_invalid_fast_and_the_rest_of_the_file_
     assert r0["status"] == "invalid_solution" and r0["stats"]["reason"] == "path_over_limit"
     assert r0["stats"]["limit"] == {"limit": "checked_states", "value": 1 + 40001 * 81, "max": MAX_CHECKED_STATES}
     assert records[pid1]["status"] in ("success", "invalid_solution") and "limit" not in records[pid1]["stats"]
+
+
+def test_the_gcs_papers_dataset_exports_its_own_robot(tmp_path):
+    """`gcs-arm` runs on the GCS paper's robot: the export ships that robot's files, mounts its
+    gripper where the suite's model does, and holds no finger joints (they are welded)."""
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from scenes.robot_model import load_robot
+
+    write_export("gcs-arm:tasks", tmp_path, time_limit_s=5.0)
+    manifest = json.loads((tmp_path / "export.json").read_text())
+    assert "robot/iiwa14_spheres.urdf" in manifest["files"] and "robot/wsg50_welded.urdf" in manifest["files"]
+    problems = problems_of(tmp_path)
+    assert len(problems) == 5 and all(p["robot"]["finger_positions_m"] == {} for p in problems)
+    assert {"shelf_upper", "binR_front", "bin_floor"} <= {o["name"] for o in problems[0]["obstacles"]}
+    plant = MultibodyPlant(0.0)
+    Parser(plant).AddModels(str(tmp_path / "robot" / "iiwa14_wsg50.urdf"))
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("iiwa_link_0"))
+    plant.Finalize()
+    assert plant.num_positions() == 7
+    robot = load_robot("iiwa14-spheres")
+    context = plant.CreateDefaultContext()
+    for q in robot.random_configurations(np.random.default_rng(3), 5):
+        plant.SetPositions(context, q)
+        X = plant.EvalBodyPoseInWorld(context, plant.GetBodyByName("body")).GetAsMatrix4()
+        np.testing.assert_allclose(X, robot.gripper_pose(q), atol=1e-9)
