@@ -255,7 +255,9 @@ class PRMRoadmapPlanner(PlannerBase):
     name: ClassVar[str] = "prm-roadmap"
     Config: ClassVar[type] = PRMRoadmapConfig
     solver: ClassVar[str] = "PRM (fixed roadmap)"
-    search_space: ClassVar[dict[str, tuple]] = {}
+    #: the paper's two generations (10,000 milestones in its final code, 15,000 in the arXiv
+    #: version) and OMPL's default neighbours; not tuned: the paper's experiment runs its settings
+    search_space: ClassVar[dict[str, tuple]] = {"roadmap_size": (10000, 15000), "max_nearest_neighbors": (5, 10)}
     tuning_objective: ClassVar[str] = "length"
 
     def __init__(self, config: PRMRoadmapConfig | None = None) -> None:
