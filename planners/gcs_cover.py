@@ -72,9 +72,10 @@ def scene_seeds(problem) -> tuple[list[tuple[str, np.ndarray]], dict]:
     ds = drake_plan_scene(problem)
     named = [(n, paper_ik(ds, transform(p.p_m, p.rpy_rad), spec.q0_rad)) for n, p in spec.poses.items()]
     named += [(n, np.asarray(q, float)) for n, q in spec.joints_rad.items()]
-    kept = [(n, q) for n, q in named if q is not None and world.is_free(q)]
+    usable = [q is not None and world.is_free(q) for _, q in named]
+    kept = [nq for nq, ok in zip(named, usable) if ok]
     return kept, {"seeds_from": "scene", "ik_s": time.perf_counter() - t0, "seeds": [n for n, _ in kept],
-                  "seeds_dropped": [n for n, q in named if q is None or not world.is_free(q)]}
+                  "seeds_dropped": [n for (n, _), ok in zip(named, usable) if not ok]}
 
 
 def task_chain(problem, *, seed: int, rrt_time_s: float = 2.0) -> tuple[np.ndarray | None, dict]:

@@ -319,7 +319,7 @@ def grow_for_world(rs: RegionSet, problem, builder: RegionBuilder) -> dict:
     t0 = time.perf_counter()
     world = planning_world(problem)
     if problem.scene.spec.region_seeds is not None:  # the scene's own hand-placed seeds
-        chain, info = None, {}
+        chain = None
         named, info = scene_seeds(problem)
         for _, q in named:
             _add_region(rs, builder, world, q)

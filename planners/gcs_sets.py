@@ -203,23 +203,18 @@ class RegionSet:
 
     def save(self, path: Path) -> None:
         """Write atomically (workers of one run may build the same world side by side)."""
-        path.parent.mkdir(parents=True, exist_ok=True)
         sizes = np.array([len(b) for b in self.b], int)
         meta = {"format": FORMAT_VERSION, "world_hash": self.world_hash, "offline_s": self.offline_s,
                 "problems": self.problems, "iris": self.iris, "region_build_s": self.region_build_s,
                 "verified": self.checked}
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-        os.close(fd)
-        with open(tmp, "wb") as f:
-            np.savez_compressed(
-                f, sizes=sizes,
-                A=np.concatenate(self.A) if self.A else np.zeros((0, 7)),
-                b=np.concatenate(self.b) if self.b else np.zeros(0),
-                seeds=np.array(self.seeds).reshape(-1, 7),
-                edges=np.array(self.edges, int).reshape(-1, 2),
-                meta=np.array(json.dumps(meta)),
-            )
-        os.replace(tmp, path)
+        save_npz_atomically(
+            path, sizes=sizes,
+            A=np.concatenate(self.A) if self.A else np.zeros((0, 7)),
+            b=np.concatenate(self.b) if self.b else np.zeros(0),
+            seeds=np.array(self.seeds).reshape(-1, 7),
+            edges=np.array(self.edges, int).reshape(-1, 2),
+            meta=np.array(json.dumps(meta)),
+        )
 
     @classmethod
     def load(cls, path: Path) -> RegionSet:
@@ -241,18 +236,33 @@ def problem_hash(problem, *, rule: str = CURRENT_RULE) -> str:
     return hashlib.sha1(blob.tobytes()).hexdigest()[:16]
 
 
-def cache_dirs(cache_dir: str | Path | None) -> list[Path]:
-    """Where region sets are looked up: the given (or default) cache, then every dataset's
-    `regions/` directory."""
-    first = Path(cache_dir) if cache_dir else DEFAULT_CACHE_DIR
+def save_npz_atomically(path: Path, **arrays) -> None:
+    """Write `arrays` to `path` (.npz, compressed) through a temporary file renamed into place,
+    so that a reader never sees a half-written file (workers may build the same world side by
+    side)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
+    os.close(fd)
+    with open(tmp, "wb") as f:
+        np.savez_compressed(f, **arrays)
+    os.replace(tmp, path)
+
+
+def cache_dirs(cache_dir: str | Path | None, *, default: Path = DEFAULT_CACHE_DIR,
+               subdir: str = "regions") -> list[Path]:
+    """Where cached sets are looked up: the given (or `default`) cache, then every dataset's
+    `subdir/` directory (region sets by default; `prm-roadmap`'s roadmaps in `roadmaps/`)."""
+    first = Path(cache_dir) if cache_dir else default
     dirs = [first]
     if DATASETS_DIR.exists():
-        dirs += sorted(p / "regions" for p in DATASETS_DIR.iterdir() if (p / "regions").is_dir())
+        dirs += sorted(p / subdir for p in DATASETS_DIR.iterdir() if (p / subdir).is_dir())
     return dirs
 
 
-def find_cached(whash: str, cache_dir: str | Path | None) -> Path | None:
-    for d in cache_dirs(cache_dir):
+def find_cached(whash: str, cache_dir: str | Path | None, *, default: Path = DEFAULT_CACHE_DIR,
+                subdir: str = "regions") -> Path | None:
+    """The first `cache_dirs` file named after hash `whash`, or None."""
+    for d in cache_dirs(cache_dir, default=default, subdir=subdir):
         path = d / f"{whash}.npz"
         if path.exists():
             return path

@@ -30,11 +30,10 @@ NO_SOLUTION (`path_still_collides`): the roadmap is fixed, there is nothing to p
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import json
 import logging
-import os
-import tempfile
 import time
 from pathlib import Path
 from typing import Any, ClassVar
@@ -50,7 +49,6 @@ log = logging.getLogger(__name__)
 FORMAT_VERSION = 1
 #: Roadmaps built on demand (results/ is generated output); datasets may carry `roadmaps/`.
 DEFAULT_CACHE_DIR = Path(__file__).resolve().parents[1] / "results" / "roadmaps"
-DATASETS_DIR = Path(__file__).resolve().parents[1] / "scenes" / "datasets"
 #: Spacing of the seed paths' states fed to the roadmap (the paper's BiRRT step, rad).
 SEED_PATH_STEP_RAD = 0.1
 #: RRT-Connect's budget per pair of seeds (s).
@@ -117,14 +115,11 @@ class Roadmap:
     seeded: int  # milestones fed from the seed paths
 
     def save(self, path: Path) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-        os.close(fd)
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, milestones=self.milestones, edges=self.edges,
-                                meta=json.dumps({"format": FORMAT_VERSION, "key": self.key, "offline_s": self.offline_s,
-                                                 "seeded": self.seeded}))
-        os.replace(tmp, path)
+        from planners.gcs_sets import save_npz_atomically
+
+        save_npz_atomically(path, milestones=self.milestones, edges=self.edges,
+                            meta=json.dumps({"format": FORMAT_VERSION, "key": self.key, "offline_s": self.offline_s,
+                                             "seeded": self.seeded}))
 
     @classmethod
     def load(cls, path: Path) -> "Roadmap":
@@ -134,6 +129,11 @@ class Roadmap:
                 raise SuiteError(f"roadmap {path}: format {meta.get('format')!r}, this suite reads {FORMAT_VERSION}")
             return cls(meta["key"], z["milestones"], z["edges"], float(meta["offline_s"]), int(meta["seeded"]))
 
+    @functools.cached_property
+    def edge_lengths(self) -> np.ndarray:
+        """Each edge's joint-space length (E,), computed once (a query only adds its joins)."""
+        return np.linalg.norm(self.milestones[self.edges[:, 0]] - self.milestones[self.edges[:, 1]], axis=1)
+
     def graph(self, extra: list[tuple[int, int]] = (), n_extra: int = 0, points: np.ndarray | None = None):
         """The roadmap as a symmetric sparse matrix of edge lengths, with `n_extra` more nodes
         (at `points`) joined by the `extra` edges."""
@@ -141,8 +141,9 @@ class Roadmap:
 
         n = len(self.milestones) + n_extra
         all_points = self.milestones if points is None else np.vstack([self.milestones, points])
-        e = np.asarray(list(self.edges) + list(extra), int).reshape(-1, 2)
-        w = np.linalg.norm(all_points[e[:, 0]] - all_points[e[:, 1]], axis=1)
+        x = np.asarray(extra, int).reshape(-1, 2)
+        e = np.concatenate([self.edges.reshape(-1, 2), x])
+        w = np.concatenate([self.edge_lengths, np.linalg.norm(all_points[x[:, 0]] - all_points[x[:, 1]], axis=1)])
         w = np.maximum(w, 1e-12)  # a zero weight would read as no edge
         return coo_matrix((np.concatenate([w, w]), (np.concatenate([e[:, 0], e[:, 1]]),
                                                      np.concatenate([e[:, 1], e[:, 0]]))), shape=(n, n)).tocsr()
@@ -153,14 +154,6 @@ def roadmap_key(problem: PlanningProblem, cfg: PRMRoadmapConfig) -> str:
     from planners.gcs_sets import world_hash
 
     return world_hash(problem, cfg)
-
-
-def cache_dirs(roadmap_dir: str) -> list[Path]:
-    first = Path(roadmap_dir) if roadmap_dir else DEFAULT_CACHE_DIR
-    dirs = [first]
-    if DATASETS_DIR.exists():
-        dirs += sorted(p / "roadmaps" for p in DATASETS_DIR.iterdir() if (p / "roadmaps").is_dir())
-    return dirs
 
 
 def seed_path_states(problem: PlanningProblem) -> list[np.ndarray]:
@@ -239,11 +232,12 @@ def build_roadmap(problem: PlanningProblem, cfg: PRMRoadmapConfig, key: str) -> 
 
 def roadmap_for(problem: PlanningProblem, cfg: PRMRoadmapConfig) -> tuple[Roadmap, str]:
     """The world's roadmap from the cache, or built and stored; with "hit" or "built"."""
+    from planners.gcs_sets import find_cached
+
     key = roadmap_key(problem, cfg)
-    for d in cache_dirs(cfg.roadmap_dir):
-        path = d / f"{key}.npz"
-        if path.exists():
-            return Roadmap.load(path), "hit"
+    path = find_cached(key, cfg.roadmap_dir, default=DEFAULT_CACHE_DIR, subdir="roadmaps")
+    if path is not None:
+        return Roadmap.load(path), "hit"
     rm = build_roadmap(problem, cfg, key)
     rm.save((Path(cfg.roadmap_dir) if cfg.roadmap_dir else DEFAULT_CACHE_DIR) / f"{key}.npz")
     return rm, "built"
@@ -262,15 +256,14 @@ class PRMRoadmapPlanner(PlannerBase):
 
     def __init__(self, config: PRMRoadmapConfig | None = None) -> None:
         super().__init__(config)
-        self._roadmaps: dict[tuple, tuple[Roadmap, str, object]] = {}
+        self._roadmaps: dict[tuple, tuple[Roadmap, str]] = {}
 
     def prepare(self, problem: PlanningProblem) -> None:
         """Load (or build, offline) the world's roadmap before the trial's clock starts."""
         key = problem.world_key()
         if key in self._roadmaps or problem.pre_status is not None or problem.q_goal is None:
             return
-        rm, cache = roadmap_for(problem, self.config)
-        remember(self._roadmaps, key, (rm, cache, rm.graph()), max_items=2)
+        remember(self._roadmaps, key, roadmap_for(problem, self.config), max_items=2)
 
     def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
         from scipy.sparse.csgraph import dijkstra
@@ -278,7 +271,7 @@ class PRMRoadmapPlanner(PlannerBase):
         cfg = self.config
         if problem.world_key() not in self._roadmaps:  # called without prepare: still offline cost
             self.prepare(problem)
-        rm, cache, _ = self._roadmaps[problem.world_key()]
+        rm, cache = self._roadmaps[problem.world_key()]
         t0 = time.perf_counter()
         checks0 = world.checks
         stats: dict[str, Any] = {"offline_s": rm.offline_s, "roadmap_cache": cache, "milestones": len(rm.milestones),

@@ -131,12 +131,10 @@ def add_scene_to_plant(
         plant.GetFrameByName("body", wsg),
         RigidTransform(robot.X_7G),
     )
-    if mode == "plan":
+    if mode == "plan" and not robot.welded_fingers:  # a welded gripper's model file welds them already
         opening = spec.grasp.open_width_m if gripper_opening_m is None else gripper_opening_m
         body_frame = plant.GetFrameByName("body", wsg)
         for name, X_GF in robot.finger_offsets(opening).items():
-            if robot.welded_fingers:
-                break  # the model file welds them already
             plant.RemoveJoint(plant.GetJointByName(f"{name}_sliding_joint", wsg))
             plant.WeldFrames(body_frame, plant.GetFrameByName(name, wsg), RigidTransform(X_GF))
 

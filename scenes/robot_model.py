@@ -1,9 +1,10 @@
 """The robot as data, read from the project's own model files, with fast numpy kinematics.
 
-One source of truth: a robot variant's model files (`ROBOTS`: the project's own `models/iiwa14.urdf`
-and `models/wsg50.urdf` by default) are parsed here for the kinematic chain, the joint limits and
-the collision primitives; the Drake scene parses the same files. The forward kinematics below serves the python-fcl world and the metrics, where calling
-into Drake per configuration would cost more than the computation itself.
+One source of truth: a robot variant's model files (`ROBOTS`: the project's own
+`models/iiwa14.urdf` and `models/wsg50.urdf` by default) are parsed here for the kinematic chain,
+the joint limits and the collision primitives; the Drake scene parses the same files. The forward
+kinematics below serves the python-fcl world and the metrics, where calling into Drake per
+configuration would cost more than the computation itself.
 
 Frames: W world (= robot base link_0), L_i link i, G the gripper frame (WSG body: +y from the
 palm towards the finger tips, x the closing axis).

@@ -139,15 +139,16 @@ def build_dataset(*, name: str = DATASET, search_s: float = 20.0, rrt_starts: in
     from suite.run.references import clearance_summary, straight_certified
     from suite.run.runner import git_commit, versions, worker_init
     from suite.run.witnesses import MIN_WITNESS_CLEARANCE_M, choose_witness, witness_with_margin
+    from suite.scoring.polyline import path_length_rad
     from scenes.identity_rule import CURRENT_RULE
 
     t0 = time.perf_counter()
     out = dataset_dir(name)
     scene = paper_scene()
     labelled = task_problems(scene)
+    pids = [problem_id(p) for _, p in labelled]
     metas, todo = {}, []
-    for label, p in labelled:
-        pid = problem_id(p)
+    for pid, (label, p) in zip(pids, labelled):
         line = straight_line(p)
         metas[pid] = {"task": label, "trivial": line.trivial, "difficulty": round(line.collision_fraction, 6),
                       "straight_length_rad": line.length_rad, "split": "test", "benchmark": True}
@@ -173,11 +174,10 @@ def build_dataset(*, name: str = DATASET, search_s: float = 20.0, rrt_starts: in
     if progress_bar and work:
         print(file=sys.stderr)
     records = []
-    for label, p in labelled:
-        pid = problem_id(p)
+    for pid, (label, p) in zip(pids, labelled):
         m = metas[pid]
         ref = m["reference"]
-        m["reference_length_rad"] = float(np.sum(np.linalg.norm(np.diff(np.asarray(ref["path"]), axis=0), axis=1)))
+        m["reference_length_rad"] = path_length_rad(ref["path"])
         witness, _ = witness_with_margin(p, choose_witness(p, ref, None))
         if not m["trivial"] and witness["clearance_min_m"] < MIN_WITNESS_CLEARANCE_M:
             raise SuiteError(f"task {label}: no witness keeps {MIN_WITNESS_CLEARANCE_M} m from the scene")

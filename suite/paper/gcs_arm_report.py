@@ -49,10 +49,13 @@ PAPER = {
 
 
 def _quartiles(values: list[float]) -> dict[str, float] | None:
+    """The run summary's median and quartiles (`MetricStats`) as a dict; None for no values."""
+    from suite.report.summary_stats import MetricStats
+
     if not values:
         return None
-    q1, med, q3 = np.percentile(values, [25, 50, 75])
-    return {"median": float(med), "q1": float(q1), "q3": float(q3)}
+    s = MetricStats.of(np.asarray(values, float))
+    return {"median": s.median, "q1": s.q1, "q3": s.q3}
 
 
 def task_labels(dataset: str) -> dict[str, str]:
@@ -227,19 +230,18 @@ def plot_paths(run_dir: Path, labels: dict[str, str], out: Path, *, planners=("g
     return out
 
 
-def offline_work(dataset: str, *, rebuild: bool = False) -> dict[str, Any]:
-    """Build (or load) the world's regions and roadmap into the dataset's directory; their
-    figures (seconds are the builds' own, stored with the data)."""
+def offline_work(dataset: str, problem, *, rebuild: bool = False) -> tuple[dict[str, Any], Any]:
+    """Build (or load) the regions and the roadmap of `problem`'s world into the dataset's
+    directory. Returns their figures (seconds are the builds' own, stored with the data) and the
+    region set."""
     from planners.gcs import GcsPlanner
     from planners.gcs_regions import regions_for
     from planners.ompl_roadmap import PRMRoadmapConfig, roadmap_for
-    from suite.problems.dataset import dataset_dir, load_dataset
+    from suite.problems.dataset import dataset_dir
     from suite.run.trial import make_config
 
-    ds = load_dataset(f"{dataset}:tasks")
-    problem = ds.problems[0]
     d = dataset_dir(dataset)
-    gcs_cfg = make_config(GcsPlanner, {**PAPER_GCS, "regions_dir": str(d / "regions")})
+    gcs_cfg = make_config(GcsPlanner, PAPER_GCS)
     rs, info = regions_for(problem, gcs_cfg.region_options(), cache_dir=d / "regions", fresh=rebuild)
     rm_cfg = PRMRoadmapConfig(roadmap_dir=str(d / "roadmaps"))
     if rebuild:
@@ -250,7 +252,7 @@ def offline_work(dataset: str, *, rebuild: bool = False) -> dict[str, Any]:
     return {"regions": len(rs), "region_edges": len(rs.edges) // 2, "regions_s": rs.offline_s,
             "regions_cache": info["cache"], "roadmap_milestones": len(rm.milestones),
             "roadmap_edges": len(rm.edges), "roadmap_seeded": rm.seeded, "roadmap_s": rm.offline_s,
-            "roadmap_cache": rm_cache, "_regions": rs}
+            "roadmap_cache": rm_cache}, rs
 
 
 def run_protocol(out: Path, *, dataset: str = "gcs-arm", runs: int = 10, time_limit_s: float = 5.0,
@@ -262,16 +264,13 @@ def run_protocol(out: Path, *, dataset: str = "gcs-arm", runs: int = 10, time_li
     import yaml
 
     from suite.cli import main as suite_main
-    from suite.paper.gcs_arm import TASKS, task_label
+    from suite.paper.gcs_arm import TASKS, gcs_optimality, task_label
     from suite.problems.dataset import load_dataset
 
     out.mkdir(parents=True, exist_ok=True)
     labels = task_labels(dataset)
-    off = offline_work(dataset, rebuild=rebuild)
-    rs = off.pop("_regions")
     ds = load_dataset(f"{dataset}:tasks")
-    from suite.paper.gcs_arm import gcs_optimality
-
+    off, rs = offline_work(dataset, ds.problems[0], rebuild=rebuild)
     optimality = {labels[pid]: gcs_optimality(p, rs) for pid, p in zip(ds.ids, ds.problems)}
     # gcs and the PRMs find the regions and the roadmap in the dataset's directory themselves (no
     # path in the settings: a trial's id must not depend on where the checkout lies)
