@@ -37,6 +37,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b.add_argument("--executor", choices=("local", "dask"), default="local", help="where jobs run (default local)")
     b.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://HOST:PORT (with --executor dask)")
     b.add_argument("--limit", type=positive_int, default=None, help="build only the first K worlds")
+    b.add_argument("--tune-sample", type=positive_int, default=None, metavar="PER_FAMILY",
+                   help="only the worlds of `tune --per-family PER_FAMILY`'s sample (the non-trivial problems of "
+                        "the dataset's tune split; --dataset names the dataset alone)")
     b.add_argument("--rebuild", action="store_true",
                    help="grow every world from nothing, ignoring cached regions (e.g. to re-measure the offline "
                         "cost on a quiet machine, or after changing how regions grow)")
@@ -89,7 +92,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.scheduler and args.executor != "dask":
         raise SuiteError("--scheduler needs --executor dask")
-    ds = load_dataset(args.dataset)
+    if args.tune_sample is not None:
+        from suite.cli.tune import tuning_problems
+
+        ds, sample = tuning_problems(args.dataset, per_family=args.tune_sample, time_limit_s=5.0)
+        problems = [p for p, _ in sample]
+    else:
+        ds = load_dataset(args.dataset)
+        problems = ds.problems
     chosen = {k: v for k, v in (("iris", args.iris), ("seeding", args.seeding)) if v is not None}
     options = GcsConfig(**chosen).region_options()
     out = Path(args.out) if args.out else dataset_dir(parse_dataset_arg(args.dataset)[0]) / "regions"
@@ -98,11 +108,11 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise SuiteError(f"--out {str(out)!r} is not writable: {exc.strerror}") from None
     worlds: dict[str, list] = {}
-    for p in ds.problems:
+    for p in problems:
         if p.pre_status is None and p.q_goal is not None:
             worlds.setdefault(world_hash(p, options), []).append(p)
     items = list(worlds.values())[: args.limit]
-    print(f"{len(ds.problems)} problems in {len(worlds)} collision worlds; building {len(items)} "
+    print(f"{len(problems)} problems in {len(worlds)} collision worlds; building {len(items)} "
           f"({options.iris}) into {out} ({args.executor}, {args.jobs} workers)", flush=True)
     from suite.run.executors import Job, LocalExecutor
 
@@ -189,7 +199,8 @@ def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, i
         "size_bytes": sum(f.stat().st_size for f in out.glob("*.npz")),
         "worlds_detail": rows,
     }
-    (out / summary_name(args.dataset)).write_text(json.dumps(summary, indent=1))
+    selection = args.dataset if args.tune_sample is None else f"{args.dataset}:tune-sample{args.tune_sample}"
+    (out / summary_name(selection)).write_text(json.dumps(summary, indent=1))
     if not rows:
         print(f"no world was built: each of the {len(items)} failed (see above)", file=sys.stderr)
         return 1

@@ -159,6 +159,10 @@ def test_regions_build_cli_builds_once_per_world(tmp_path, capsys):
     assert main([*argv, "--rebuild"]) == 0  # --rebuild grows it again from nothing
     assert "(1 built now)" in capsys.readouterr().out
     assert main(["regions", "build", "--dataset", "recycle-v1:quick", "--scheduler", "tcp://h:1"]) == 2
+    capsys.readouterr()
+    # --tune-sample takes the tune split of a dataset named alone: a tier is one clear line
+    assert main(["regions", "build", "--dataset", "recycle-v1:quick", "--tune-sample", "3", "--out", str(tmp_path)]) == 2
+    assert "--dataset takes a dataset name" in capsys.readouterr().err
 
 
 class _BallWorld:
