@@ -91,6 +91,10 @@ class PlanningProblem:
         time_limit_s: the planner's budget.
         seed: the trial's seed (derived from the run seed and the trial's identity).
         pre_status: set when the problem cannot be posed (IK_FAILED); planners are not run.
+        warm_start: an optional joint path (N, 7) a planner may start from (the path being
+            executed when it replans toward a moved goal); its ends need not be q_start and
+            q_goal (`warm_start_guess` maps it onto them). A planner that ignores it is unchanged;
+            it is no part of the problem's identity.
     """
 
     kind: str
@@ -106,6 +110,7 @@ class PlanningProblem:
     time_limit_s: float
     seed: int
     pre_status: PlanStatus | None = None
+    warm_start: np.ndarray | None = None
 
     @property
     def name(self) -> str:
@@ -123,6 +128,32 @@ class PlanningProblem:
 
     def with_(self, **changes) -> "PlanningProblem":
         return dataclasses.replace(self, **changes)
+
+
+def resample_by_length(path: np.ndarray, n: int) -> np.ndarray:
+    """n points (n, 7) evenly spaced by joint-space arc length along the polyline `path`, its ends
+    exact."""
+    path = np.asarray(path, float)
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] <= 0:
+        return np.repeat(path[:1], n, axis=0)
+    u = np.linspace(0.0, s[-1], n)
+    out = np.column_stack([np.interp(u, s, path[:, j]) for j in range(path.shape[1])])
+    out[0], out[-1] = path[0], path[-1]
+    return out
+
+
+def warm_start_guess(problem: "PlanningProblem", n: int) -> np.ndarray | None:
+    """The problem's warm start as n points (n, 7) from q_start to q_goal: resampled by length, its
+    ends moved onto the problem's by a correction that fades linearly along it; None without one."""
+    if problem.warm_start is None or problem.q_goal is None:
+        return None
+    g = resample_by_length(np.asarray(problem.warm_start, float), n)
+    u = np.linspace(0.0, 1.0, n)[:, None]
+    g = g + (1 - u) * (np.asarray(problem.q_start, float) - g[0]) + u * (np.asarray(problem.q_goal, float) - g[-1])
+    g[0], g[-1] = problem.q_start, problem.q_goal
+    return g
 
 
 @dataclasses.dataclass(frozen=True)

@@ -33,7 +33,7 @@ from pydrake.planning import KinematicTrajectoryOptimization
 from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import BsplineTrajectory
 
-from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
+from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, warm_start_guess
 from planners.drake_queries import EvaluationCounter, query_stats
 from scenes.errors import SuiteError
 from planners.worlds import drake_plan_scene, remember
@@ -204,9 +204,14 @@ class TrajoptPlanner(PlannerBase):
 
     def _initial_control_points(self, problem: PlanningProblem, ds, plant_context, counter) -> tuple[np.ndarray, str]:
         """The initial guess's control points (num_control_points, 7) and its name: the joint-space
-        line, or a bend through `_via_point` (`counter` counts its evaluations). A subclass may seed
-        the optimization otherwise (`suite.run.polish.SeededTrajopt`: from a given path)."""
+        line, or a bend through `_via_point` (`counter` counts its evaluations); a problem's warm
+        start (the path being executed when it replans) comes first, mapped onto its ends. A
+        subclass may seed the optimization otherwise (`suite.run.polish.SeededTrajopt`: from a
+        given path)."""
         cfg = self.config
+        warm = warm_start_guess(problem, cfg.num_control_points)
+        if warm is not None:
+            return warm, "warm_start"
         q_start = np.asarray(problem.q_start, float)
         q_goal = np.asarray(problem.q_goal, float)
         via = None

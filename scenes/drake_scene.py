@@ -101,6 +101,7 @@ def add_scene_to_plant(
     gripper_opening_m: float | None = None,
     held: HeldCan | None = None,
     couple_fingers: bool = False,
+    moving_bin=None,
 ) -> tuple[object, object]:
     """Add robot, gripper, static world and cans to an unfinalized plant.
 
@@ -113,6 +114,8 @@ def add_scene_to_plant(
         held: in "plan" mode, a can welded into the gripper (it is then not on the plate).
         couple_fingers: in "sim" mode, tie the fingers together (left = -right) as the WSG's
             single drive does; needs a discrete plant with Drake's SAP solver.
+        moving_bin: in "sim" mode, a `scenes.moving_bin.MovingBinScenario`: the bin and the person
+            holding it become one driven body (`_add_moving_bin`) instead of welded boxes.
 
     Returns:
         The iiwa and WSG model instances.
@@ -157,7 +160,12 @@ def add_scene_to_plant(
     scene_instance = plant.AddModelInstance("scene")
     plate_body = plant.AddRigidBody("plate", scene_instance, SpatialInertia.Zero())
     plant.WeldFrames(plant.world_frame(), plate_body.body_frame())
+    if moving_bin is not None and mode != "sim":
+        raise ValueError("a moving bin is only modelled in 'sim' mode")
+    moving_bodies = _add_moving_bin(plant, spec, moving_bin, friction) if moving_bin is not None else None
     for obstacle in spec.obstacles():
+        if moving_bodies is not None and obstacle.name in spec.bin.boxes():
+            continue  # on the driven body
         _add_obstacle(plant, obstacle, friction, plate_body if obstacle.name == "plate" else None)
 
     can_shape = Cylinder(spec.can.radius_m, spec.can.height_m)
@@ -192,7 +200,55 @@ def add_scene_to_plant(
     scene_graph.collision_filter_manager().Apply(
         _filters(plant, iiwa, wsg, plate_body, held_body, variant.filtered)
     )
+    if moving_bodies is not None:
+        # The driven bin slides over the table top it stands on (and past nothing else static:
+        # its region is clear of the plate and the wall, `scenes.moving_bin.check_scenario`).
+        decl = CollisionFilterDeclaration()
+        decl.ExcludeBetween(plant.CollectRegisteredGeometries(list(moving_bodies)),
+                            plant.CollectRegisteredGeometries([plant.world_body(), plate_body]))
+        scene_graph.collision_filter_manager().Apply(decl)
     return iiwa, wsg
+
+
+#: The model instance of a driven bin, its two prismatic joints (displacements from the spec's
+#: bin centre, m) and its bodies.
+MOVING_BIN_INSTANCE = "moving_bin"
+MOVING_BIN_JOINTS = ("bin_x", "bin_y")
+
+
+def _add_moving_bin(plant, spec, scenario, friction):
+    """The bin (floor and walls as the static one's) and the person holding it as one body
+    driven in x and y: world -> prismatic x -> a light carriage -> prismatic y -> bin, the person
+    welded to the bin. Both joints are actuated (the execution gives them stiff PD gains and
+    drives them along the bin's path). Returns the bin and person bodies."""
+    from pydrake.multibody.tree import FixedOffsetFrame, PrismaticJoint
+
+    from scenes.moving_bin import person_offset_m
+
+    instance = plant.AddModelInstance(MOVING_BIN_INSTANCE)
+    cx, cy = spec.bin.center_xy_m
+    sx, sy, sz = spec.bin.outer_size_m
+    carriage = plant.AddRigidBody("bin_carriage", instance,
+                                  SpatialInertia(1.0, np.zeros(3), UnitInertia.SolidBox(0.1, 0.1, 0.1)))
+    bin_body = plant.AddRigidBody("bin", instance, SpatialInertia(
+        scenario.bin_mass_kg, np.zeros(3), UnitInertia.SolidBox(sx, sy, sz)))
+    r, h = scenario.person_radius_m, scenario.person_height_m
+    person = plant.AddRigidBody("person", instance, SpatialInertia(
+        scenario.person_mass_kg, np.zeros(3), UnitInertia.SolidCylinder(r, h, [0, 0, 1])))
+    origin = plant.AddFrame(FixedOffsetFrame("bin_origin", plant.world_frame(), RigidTransform([cx, cy, 0.0])))
+    for name, parent, child, axis in (("bin_x", origin, carriage.body_frame(), [1.0, 0, 0]),
+                                      ("bin_y", carriage.body_frame(), bin_body.body_frame(), [0, 1.0, 0])):
+        joint = plant.AddJoint(PrismaticJoint(name, parent, child, axis))
+        plant.AddJointActuator(f"{name}_actuator", joint, 1e6)
+    off = person_offset_m(scenario, spec)
+    plant.WeldFrames(bin_body.body_frame(), person.body_frame(), RigidTransform([off[0], off[1], h / 2]))
+    for name, box in spec.bin.boxes().items():
+        X = RigidTransform([box.center_m[0] - cx, box.center_m[1] - cy, box.center_m[2]])
+        plant.RegisterVisualGeometry(bin_body, X, DrakeBox(*box.size_m), name, np.asarray(box.color_rgba))
+        plant.RegisterCollisionGeometry(bin_body, X, DrakeBox(*box.size_m), name, friction)
+    plant.RegisterVisualGeometry(person, RigidTransform(), Cylinder(r, h), "person", np.array([0.80, 0.60, 0.45, 1.0]))
+    plant.RegisterCollisionGeometry(person, RigidTransform(), Cylinder(r, h), "person", friction)
+    return bin_body, person
 
 
 def _filters(plant, iiwa, wsg, plate_body, held_body, filtered) -> CollisionFilterDeclaration:
@@ -235,6 +291,7 @@ def build_drake_scene(
     build: bool = True,
     plant_config=None,
     couple_fingers: bool = False,
+    moving_bin=None,
 ):
     """Build the scene's diagram.
 
@@ -248,7 +305,7 @@ def build_drake_scene(
         build: build the diagram.
         plant_config: a `MultibodyPlantConfig` (time step, contact model and approximation);
             it replaces `time_step_s` when given.
-        couple_fingers: see `add_scene_to_plant`.
+        couple_fingers, moving_bin: see `add_scene_to_plant`.
 
     Returns:
         A `DrakeScene` (its diagram is None when `build` is False).
@@ -260,7 +317,7 @@ def build_drake_scene(
         plant, scene_graph = AddMultibodyPlantSceneGraph(builder, time_step_s)
     iiwa, wsg = add_scene_to_plant(
         plant, scene_graph, scene, mode=mode, gripper_opening_m=gripper_opening_m, held=held,
-        couple_fingers=couple_fingers,
+        couple_fingers=couple_fingers, moving_bin=moving_bin,
     )
     sensors: dict[str, RgbdSensor] = {}
     poses: dict[str, RigidTransform] = {}

@@ -112,6 +112,39 @@ class CommandStream:
         """Hold still for the settling time at the end."""
         self._add("hold", -1, self._config.settle_s, None, self._open, self._open, False)
 
+    # --- piece by piece (the moving bin's replanning loop) ------------------------------------
+
+    def append_motion(self, phase: str, can_id: int, trajectory, *, width_m: float, carrying: bool) -> None:
+        """Append one timed motion (a `TimedTrajectory` or a `splice.BlendTrajectory`) from where the
+        stream ends."""
+        self._add(phase, can_id, trajectory.duration_s, trajectory, width_m, width_m, carrying)
+
+    def append_hold(self, phase: str, can_id: int, duration_s: float, *, width_from_m: float,
+                    width_to_m: float | None = None, carrying: bool) -> None:
+        """Append a piece where the arm holds where the stream ends (the gripper may move)."""
+        to = width_from_m if width_to_m is None else width_to_m
+        self._add(phase, can_id, duration_s, None, width_from_m, to, carrying)
+
+    def state(self, t_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The commanded arm position, velocity and acceleration (7,) each at t_s."""
+        return self.at(t_s).arm(t_s)
+
+    def cut(self, t_s: float, *, can_id: int, width_m: float, carrying: bool) -> None:
+        """End the stream at t_s: the piece running then ends there and later pieces are dropped;
+        a stream that ends before t_s holds until then. The next piece starts from the commanded
+        state at t_s (a splice: `splice.stopping_blend` from it)."""
+        if t_s >= self.duration_s:
+            if t_s > self.duration_s:
+                self.append_hold("wait", can_id, t_s - self.duration_s, width_from_m=width_m, carrying=carrying)
+            return
+        q_s = self.state(t_s)[0].copy()
+        i = bisect.bisect_right(self._starts, t_s) - 1
+        del self.segments[i + 1:], self._starts[i + 1:]
+        last = self.segments[i]
+        self.segments[i] = dataclasses.replace(last, duration_s=t_s - last.t0_s)
+        self.duration_s = t_s
+        self._q = q_s
+
     def at(self, t_s: float) -> Segment:
         i = bisect.bisect_right(self._starts, t_s) - 1
         return self.segments[min(max(i, 0), len(self.segments) - 1)]

@@ -53,18 +53,21 @@ class CanResult:
                 "in_bin_at_s": None if self.in_bin_at_s is None else round(self.in_bin_at_s, 3)}
 
 
-def bin_region(spec) -> tuple[np.ndarray, np.ndarray]:
-    """The inside of the bin as an axis-aligned box (lower, upper corners), metres."""
+def bin_region(spec, center_xy_m=None) -> tuple[np.ndarray, np.ndarray]:
+    """The inside of the bin as an axis-aligned box (lower, upper corners), metres; the bin at the
+    spec's place, or with its centre at `center_xy_m` (a moving bin's current place)."""
     b = spec.bin
+    c = b.center_xy_m if center_xy_m is None else center_xy_m
     half = np.array(b.outer_size_m[:2]) / 2 - b.wall_thickness_m
-    lo = np.array([b.center_xy_m[0] - half[0], b.center_xy_m[1] - half[1], 0.0])
-    hi = np.array([b.center_xy_m[0] + half[0], b.center_xy_m[1] + half[1], b.outer_size_m[2]])
+    lo = np.array([c[0] - half[0], c[1] - half[1], 0.0])
+    hi = np.array([c[0] + half[0], c[1] + half[1], b.outer_size_m[2]])
     return lo, hi
 
 
-def where(spec, p_WC_m: np.ndarray) -> str:
-    """"bin" if the can's centre is inside the bin, "plate" if above the plate, else "elsewhere"."""
-    lo, hi = bin_region(spec)
+def where(spec, p_WC_m: np.ndarray, bin_xy_m=None) -> str:
+    """"bin" if the can's centre is inside the bin (at the spec's place, or centred at
+    `bin_xy_m`), "plate" if above the plate, else "elsewhere"."""
+    lo, hi = bin_region(spec, bin_xy_m)
     if np.all(p_WC_m >= lo) and np.all(p_WC_m <= hi):
         return "bin"
     plate = spec.plate
@@ -74,10 +77,15 @@ def where(spec, p_WC_m: np.ndarray) -> str:
     return "elsewhere"
 
 
-class _Classifier:
-    """Names the plant's bodies by role: robot, finger, can_<id>, static."""
+#: The driven bodies of a moving bin (`scenes.drake_scene._add_moving_bin`) by role.
+MOVING_ROLES = {"bin": "bin", "person": "person"}
 
-    def __init__(self, plant, iiwa, wsg):
+
+class _Classifier:
+    """Names the plant's bodies by role: robot, finger, can_<id>, static, and a moving bin's
+    "bin" and "person"."""
+
+    def __init__(self, plant, iiwa, wsg, moving_bin=None):
         from pydrake.multibody.tree import BodyIndex
 
         self.role: dict[int, str] = {}
@@ -89,6 +97,8 @@ class _Classifier:
                 self.role[i] = "finger" if body.name().endswith("_finger") else "robot"
             elif body.name().startswith("can_"):
                 self.role[i] = body.name()
+            elif moving_bin is not None and body.model_instance() == moving_bin and body.name() in MOVING_ROLES:
+                self.role[i] = MOVING_ROLES[body.name()]
             else:
                 self.role[i] = "static"
 
@@ -102,14 +112,18 @@ class _Classifier:
         if rb in robot:
             ra, rb = rb, ra
         if ra in robot:
-            if rb == "static":
+            if rb in ("static", "bin", "person"):
                 return True
-            if rb == target and ra == "finger" and segment.phase in ("descend", "close", "lift", "transit", "open"):
+            # the fingers on the can they pick: while closing on it, carrying it (lift, transit; a
+            # moving bin's blends and waits), and opening
+            if rb == target and ra == "finger" and (segment.carrying or segment.phase in ("descend", "close", "open")):
                 return False
             return rb != target or ra != "finger"
         # Neither is the robot: only the carried can's contacts matter.
         if segment.carrying and target in (ra, rb):
             other = rb if ra == target else ra
+            if other in ("bin", "person"):
+                return True
             return not (other == "static" and segment.phase == "lift" and self.name[b if ra == target else a] == "plate")
         return False
 
@@ -121,6 +135,8 @@ class Monitor:
         can_bodies: every can's plant body by id.
         in_bin_at, in_bin_wall: simulated and wall time (s) at which each can first entered the bin.
         events: the first 20 unintended contact episodes; n_episodes: all of them.
+        moving_contacts: of those, the episodes with a moving bin's "bin" or "person" (by role;
+            the robot's or the carried can's).
         peak_err: largest |q - q_desired| of any arm joint (rad).
         peak_slip: largest displacement of a carried can in the gripper frame since its lift
             began (m).
@@ -136,7 +152,8 @@ class Monitor:
         self._wall_s = wall_s
         self._desired_port = sim.commander.GetOutputPort("arm_desired_state")
         self._contact_port = plant.get_contact_results_output_port()
-        self._classifier = _Classifier(plant, sim.iiwa, sim.wsg)
+        self._classifier = _Classifier(plant, sim.iiwa, sim.wsg, getattr(sim, "moving_bin", None))
+        self.moving_contacts = {"bin": 0, "person": 0}
         inspector = sim.ds.scene_graph.model_inspector()
         self._body_of = {gid: int(plant.GetBodyFromFrameId(inspector.GetFrameId(gid)).index())
                          for gid in inspector.GetAllGeometryIds()}
@@ -181,27 +198,37 @@ class Monitor:
                 now[(min(a, b), max(a, b))] = surface.centroid()
         for pair in now.keys() - self._touching:
             self.n_episodes += 1
+            for role in (classifier.role[pair[0]], classifier.role[pair[1]]):
+                if role in self.moving_contacts:
+                    self.moving_contacts[role] += 1
             if len(self.events) < 20:
                 self.events.append(ContactEvent(t, segment.phase, segment.can_id, classifier.name[pair[0]],
                                                 classifier.name[pair[1]], tuple(float(v) for v in now[pair])))
         self._touching = set(now)
         if not full:
             return
+        bin_xy = self.bin_xy()
         for can_id, body in self.can_bodies.items():
             if can_id not in self.in_bin_at:
                 p = plant.EvalBodyPoseInWorld(pc, body).translation()
-                if where(self._spec, p) == "bin":
+                if where(self._spec, p, bin_xy) == "bin":
                     self.in_bin_at[can_id] = t
                     self.in_bin_wall[can_id] = self._wall_s()
+
+    def bin_xy(self) -> np.ndarray | None:
+        """The bin centre now (a moving bin's current place), or None for the spec's."""
+        current = getattr(self._sim, "bin_center_xy", None)
+        return current() if current is not None else None
 
     def fates(self, attempted: list[int]) -> list[CanResult]:
         """Where every can is now, in the scene's order (`attempted`: the ids of the cans whose
         cycle was executed)."""
         plant, pc = self._sim.plant, self._sim.pc
+        bin_xy = self.bin_xy()
         cans = []
         for can_id in self._can_ids:
             p = plant.EvalBodyPoseInWorld(pc, self.can_bodies[can_id]).translation()
-            place = where(self._spec, p)
+            place = where(self._spec, p, bin_xy)
             cans.append(CanResult(can_id, can_id in attempted, place, tuple(float(v) for v in p),
                                   self.in_bin_at.get(can_id) if place == "bin" else None))
         return cans

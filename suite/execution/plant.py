@@ -44,6 +44,8 @@ class Simulation:
         root: the simulator's root context; pc: the plant's context in it.
         commander: the system that turns the command stream into desired states and the arm's
             feedforward; commander_context: its context in root.
+        moving_bin: the driven bin's model instance (`scenes.drake_scene.MOVING_BIN_INSTANCE`),
+            or None for the static bin.
     """
 
     ds: Any
@@ -56,6 +58,19 @@ class Simulation:
     pc: Any
     commander: Any
     commander_context: Any
+    moving_bin: Any = None
+
+    def bin_center_xy(self) -> np.ndarray | None:
+        """Where the driven bin's centre is now (2,), m; None for the static bin."""
+        if self.moving_bin is None:
+            return None
+        origin = self.plant.GetFrameByName("bin_origin").GetFixedPoseInBodyFrame().translation()[:2]
+        return np.asarray(origin, float) + self.plant.GetPositions(self.pc, self.moving_bin)
+
+
+#: A bin drive: the desired displacement of the bin centre from the spec's (2,), m, and its
+#: velocity (2,), m/s, at a time (s).
+BinDrive = "Callable[[float], tuple[np.ndarray, np.ndarray]]"
 
 
 def build_simulation(
@@ -66,9 +81,16 @@ def build_simulation(
     config: ExecutionConfig,
     meshcat=None,
     cameras: bool = False,
+    moving_bin=None,
+    bin_drive=None,
 ) -> Simulation:
     """The scene's plant with its controllers driven by `stream`, the arm at `q_home` and the
-    gripper open (see the module docstring); recorded into `meshcat` if given."""
+    gripper open (see the module docstring); recorded into `meshcat` if given.
+
+    With `moving_bin` (a `scenes.moving_bin.MovingBinScenario`) the bin and the person holding it
+    are one body on two actuated prismatic joints, under the plant's implicit PD control (kp =
+    m w^2, kd = 2 m w on each axis, m the driven mass, w the scenario's drive bandwidth) toward
+    `bin_drive(t)`: heavy and stiff, so the arm can hit it without moving it far."""
     from pydrake.multibody.plant import MultibodyPlantConfig
     from pydrake.multibody.tree import MultibodyForces
     from pydrake.systems.analysis import Simulator
@@ -84,13 +106,20 @@ def build_simulation(
         time_step=config.time_step_s, contact_model=config.contact_model,
         discrete_contact_approximation=config.contact_approximation)
     ds = build_drake_scene(scene, mode="sim", cameras=cameras, builder=builder, build=False,
-                           plant_config=plant_config, couple_fingers=True)
+                           plant_config=plant_config, couple_fingers=True, moving_bin=moving_bin)
     plant, iiwa, wsg = ds.plant, ds.iiwa, ds.wsg
+    bin_instance = None
+    if moving_bin is not None:
+        from scenes.drake_scene import MOVING_BIN_INSTANCE
+
+        bin_instance = plant.GetModelInstanceByName(MOVING_BIN_INSTANCE)
     if config.contact_model != "point":
         _make_compliant(plant, ds.scene_graph, wsg, scene, config)
     scratch = plant.CreateDefaultContext()
     plant.SetPositions(scratch, iiwa, q_home)
     _set_gains(plant, iiwa, wsg, scratch, config)
+    if bin_instance is not None:
+        _set_bin_gains(plant, bin_instance, scratch, moving_bin.drive_bandwidth_rad_s)
     forces = MultibodyForces(plant)
     finger_signs = _finger_signs(plant, wsg)  # looked up once: the commander runs every step
     nv = plant.num_velocities()
@@ -103,7 +132,13 @@ def build_simulation(
             self.DeclareVectorOutputPort("arm_desired_state", 14, self._arm_state)
             self.DeclareVectorOutputPort("wsg_desired_state", 4, self._wsg_state)
             self.DeclareVectorOutputPort("arm_feedforward", 7, self._feedforward)
+            if bin_instance is not None:
+                self.DeclareVectorOutputPort("bin_desired_state", 4, self._bin_state)
             self._cached_t, self._cached = None, None
+
+        def _bin_state(self, context, output: BasicVector):
+            xy, v = bin_drive(context.get_time())
+            output.SetFromVector(np.concatenate([xy, v]))
 
         def _arm(self, t: float):
             # Both outputs need the same sample in every step: evaluate the trajectory once.
@@ -133,6 +168,8 @@ def build_simulation(
     builder.Connect(commander.GetOutputPort("arm_desired_state"), plant.get_desired_state_input_port(iiwa))
     builder.Connect(commander.GetOutputPort("wsg_desired_state"), plant.get_desired_state_input_port(wsg))
     builder.Connect(commander.GetOutputPort("arm_feedforward"), plant.get_actuation_input_port(iiwa))
+    if bin_instance is not None:
+        builder.Connect(commander.GetOutputPort("bin_desired_state"), plant.get_desired_state_input_port(bin_instance))
     if meshcat is not None:
         from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role
 
@@ -146,9 +183,13 @@ def build_simulation(
     plant.SetPositions(pc, iiwa, q_home)
     plant.SetPositions(pc, wsg, _finger_targets(finger_signs, spec.grasp.open_width_m, 0.0)[:2])
     plant.get_actuation_input_port(wsg).FixValue(pc, np.zeros(2))
+    if bin_instance is not None:
+        plant.SetPositions(pc, bin_instance, np.asarray(bin_drive(0.0)[0], float))
+        plant.get_actuation_input_port(bin_instance).FixValue(pc, np.zeros(2))
     commander_context = commander.GetMyContextFromRoot(root)
     return Simulation(ds=ds, plant=plant, iiwa=iiwa, wsg=wsg, diagram=diagram, simulator=simulator,
-                      root=root, pc=pc, commander=commander, commander_context=commander_context)
+                      root=root, pc=pc, commander=commander, commander_context=commander_context,
+                      moving_bin=bin_instance)
 
 
 def _check_choice(what: str, value: str, allowed: tuple[str, ...]) -> None:
@@ -172,6 +213,18 @@ def _set_gains(plant, iiwa, wsg, context, config: ExecutionConfig) -> None:
         actuator = plant.get_joint_actuator(index)
         actuator.set_controller_gains(PdControllerGains(p=config.finger_kp_n_m, d=config.finger_kd_n_s_m))
         actuator.set_effort_limit(config.grip_force_n)
+
+
+def _set_bin_gains(plant, instance, context, bandwidth_rad_s: float) -> None:
+    """Stiff PD gains on the driven bin's two axes from the mass each moves."""
+    from pydrake.multibody.tree import PdControllerGains
+
+    M = plant.CalcMassMatrix(context)
+    w = bandwidth_rad_s
+    for index in plant.GetJointActuatorIndices(instance):
+        actuator = plant.get_joint_actuator(index)
+        m = float(M[actuator.joint().velocity_start(), actuator.joint().velocity_start()])
+        actuator.set_controller_gains(PdControllerGains(p=m * w * w, d=2 * m * w))
 
 
 def _make_compliant(plant, scene_graph, wsg, scene: Scene, config: ExecutionConfig) -> None:

@@ -25,6 +25,7 @@ import time
 
 import numpy as np
 
+from planners.base import resample_by_length  # noqa: F401 (moved to planners.base; still importable here)
 from scenes.fcl_certify import CERTIFIED
 
 #: The exact check's state budget for one move's two segments; an unproved move is refused.
@@ -92,20 +93,6 @@ def polish(path: np.ndarray, certifier, *, time_s: float = 5.0, piece_rad: float
         if start_len - path_length(Q) < tol_rad:
             step *= 0.5
     return Polished(Q, before, path_length(Q), rounds, tried, kept, time.perf_counter() - t0)
-
-
-def resample_by_length(path: np.ndarray, n: int) -> np.ndarray:
-    """n points (n, 7) evenly spaced by joint-space arc length along the polyline `path`, its ends
-    exact."""
-    path = np.asarray(path, float)
-    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    if s[-1] <= 0:
-        return np.repeat(path[:1], n, axis=0)
-    u = np.linspace(0.0, s[-1], n)
-    out = np.column_stack([np.interp(u, s, path[:, j]) for j in range(path.shape[1])])
-    out[0], out[-1] = path[0], path[-1]
-    return out
 
 
 def seeded_trajopt(problem, path: np.ndarray, *, time_s: float, control_points: int | None = None):

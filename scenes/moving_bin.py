@@ -1,0 +1,276 @@
+"""A moving bin held by a person: the scenario, the bin's seeded path and the geometry it moves.
+
+The seed paper's intended scenario ("a moving person holding trash bag"): the bin moves in the
+floor plane while the arm works, held by a person who stands beside it on the side away from the
+robot base (a standing cylinder, an obstacle too). Nothing here enters a `SceneSpec`'s hashed
+fields: a scenario is a value of its own, and the worlds it makes (`spec_with_bin_at`) are built
+online for replanning, never stored, so every existing scene key and dataset stays as it is.
+
+The bin path (`BinPath`): from the spec's bin centre, the bin walks to target points drawn
+uniformly in `region_m` (a box its centre stays in), one after the other along straight lines,
+each with a trapezoidal speed profile (cruise `speed_m_s`, accelerate and brake at
+`accel_m_s2`, at rest at every target). It is sampled once on a 10 ms grid for cheap lookup. The
+bin never turns.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from scenes.errors import SuiteError
+from scenes.schema import FieldError, NonNeg, NonNegInt, Pos, PosInt, Vec2, load
+
+if TYPE_CHECKING:
+    from scenes.spec import Obstacle, SceneSpec
+
+#: The families a moving bin runs on: the paper's station and its wall variant.
+MOVING_BIN_FAMILIES = ("open", "wall")
+#: Half-size (m) of the default region around the spec's bin centre (x, y).
+DEFAULT_REGION_HALF_M = (0.08, 0.08)
+#: The bin path's sample spacing (s) and length (s); beyond it the bin stands at its last place.
+PATH_DT_S = 0.01
+PATH_HORIZON_S = 900.0
+
+
+@dataclasses.dataclass(frozen=True)
+class MovingBinScenario:
+    """How the bin moves, how the robot sees it, and how the replanning loop reacts.
+
+    Attributes:
+        speed_m_s: the bin's cruise speed (0: it stands still, the static bin).
+        accel_m_s2: its acceleration and braking limit.
+        region_m: the box its centre stays in, ((x_lo, y_lo), (x_hi, y_hi)) in metres; None for
+            the spec's bin centre +- DEFAULT_REGION_HALF_M. It must hold the spec's bin centre.
+        seed: the seed of the path's target points and of the estimate noise.
+        person_radius_m, person_height_m: the standing cylinder holding the bin.
+        person_gap_m: its gap to the bin's outer wall, on the side away from the robot base.
+        estimate_latency_s: delay of the bin estimate (sensing + processing).
+        estimate_rate_hz: estimates per second (held between updates: zero-order hold).
+        estimate_noise_m: standard deviation of the Gaussian noise on each estimate's x and y.
+        velocity_window: estimates a constant-velocity prediction fits its line to (least
+            squares; the last one alone when there is one).
+        drift_tolerance_m: a predicted drop position this far from the planned one triggers a
+            replan.
+        replan_deadline_s: a replan's wall-time deadline; its plan is spliced in this long after
+            the replan starts, from the state the current plan commands then.
+        max_wait_s: how long the arm may hold over (or near) the bin waiting for a release or a
+            plan before it stops safely and the can counts as not delivered.
+        release_margin_m: the can's centre must be this far inside the bin's inner walls (besides
+            the can's radius) for a release.
+        bin_mass_kg, person_mass_kg: the driven body's masses (heavy: the arm hardly moves it).
+        drive_bandwidth_rad_s: natural frequency of the drive's PD loop on each axis (stiff).
+    """
+
+    speed_m_s: NonNeg = 0.1
+    accel_m_s2: Pos = 0.5
+    region_m: tuple[Vec2, Vec2] | None = None
+    seed: NonNegInt = 0
+    person_radius_m: Pos = 0.2
+    person_height_m: Pos = 1.7
+    person_gap_m: NonNeg = 0.05
+    estimate_latency_s: NonNeg = 0.1
+    estimate_rate_hz: Pos = 10.0
+    estimate_noise_m: NonNeg = 0.003
+    velocity_window: PosInt = 5
+    drift_tolerance_m: Pos = 0.03
+    replan_deadline_s: Pos = 0.3
+    max_wait_s: Pos = 3.0
+    release_margin_m: NonNeg = 0.01
+    bin_mass_kg: Pos = 20.0
+    person_mass_kg: Pos = 70.0
+    drive_bandwidth_rad_s: Pos = 40.0
+
+    def __post_init__(self):
+        if self.region_m is not None:
+            (x0, y0), (x1, y1) = self.region_m
+            if not (x0 < x1 and y0 < y1):
+                raise FieldError("region_m", f"{self.region_m}: allowed: ((x_lo, y_lo), (x_hi, y_hi)) with "
+                                             "x_lo < x_hi and y_lo < y_hi")
+
+    def to_json(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["region_m"] = None if self.region_m is None else [list(c) for c in self.region_m]
+        return d
+
+
+def make_scenario(values: dict | None = None, *, where: str = "moving bin scenario: ") -> MovingBinScenario:
+    """A scenario from plain values (YAML, flags), every field checked: one SuiteError line."""
+    return load(MovingBinScenario, dict(values or {}), where=where)
+
+
+def region(scenario: MovingBinScenario, spec: SceneSpec) -> tuple[np.ndarray, np.ndarray]:
+    """The box the bin centre stays in (lower, upper corners (2,)), metres."""
+    if scenario.region_m is not None:
+        return np.array(scenario.region_m[0], float), np.array(scenario.region_m[1], float)
+    c = np.array(spec.bin.center_xy_m, float)
+    h = np.array(DEFAULT_REGION_HALF_M)
+    return c - h, c + h
+
+
+def person_offset_m(scenario: MovingBinScenario, spec: SceneSpec) -> np.ndarray:
+    """The person's axis relative to the bin centre (2,): beside the bin, away from the robot base."""
+    c = np.array(spec.bin.center_xy_m, float)
+    u = c / max(float(np.linalg.norm(c)), 1e-9)
+    half = np.array(spec.bin.outer_size_m[:2]) / 2
+    reach = float(abs(u[0]) * half[0] + abs(u[1]) * half[1])
+    return u * (reach + scenario.person_gap_m + scenario.person_radius_m)
+
+
+def person_obstacle(scenario: MovingBinScenario, spec: SceneSpec, bin_xy_m) -> Obstacle:
+    """The person as a static cylinder for a planning world with the bin centre at bin_xy_m."""
+    from scenes.spec import Obstacle, pose_tuple
+
+    X = np.eye(4)
+    X[:2, 3] = np.asarray(bin_xy_m, float) + person_offset_m(scenario, spec)
+    X[2, 3] = scenario.person_height_m / 2
+    return Obstacle("person", "cylinder", (scenario.person_radius_m, scenario.person_height_m), pose_tuple(X),
+                    (0.80, 0.60, 0.45, 1.0))
+
+
+def spec_with_bin_at(scenario: MovingBinScenario, spec: SceneSpec, bin_xy_m) -> SceneSpec:
+    """The station with the bin centre at bin_xy_m and the person beside it: a planning world of
+    the moment (its key is its own; never stored)."""
+    b = dataclasses.replace(spec.bin, center_xy_m=(float(bin_xy_m[0]), float(bin_xy_m[1])))
+    return dataclasses.replace(spec, bin=b, extra=spec.extra + (person_obstacle(scenario, spec, bin_xy_m),))
+
+
+def drop_pose(spec: SceneSpec, bin_xy_m) -> np.ndarray:
+    """The gripper pose (4, 4) over the bin's opening with the bin centre at bin_xy_m: the spec's
+    `above_bin_m` waypoint carried along with the bin (the gripper points down, its yaw by the
+    task's rule)."""
+    from scenes.grasp_rule import waypoint_pose
+
+    p = np.array(spec.waypoints.above_bin_m, float)
+    p[:2] += np.asarray(bin_xy_m, float) - np.array(spec.bin.center_xy_m, float)
+    return waypoint_pose(p)
+
+
+def _overlap(lo_a, hi_a, lo_b, hi_b) -> bool:
+    return bool(np.all(lo_a < hi_b) and np.all(lo_b < hi_a))
+
+
+def check_scenario(scenario: MovingBinScenario, spec: SceneSpec, *, reach: bool = True) -> None:
+    """Refuse a scenario this station cannot run, in one SuiteError line: a family other than
+    open and wall, a region that does not hold the bin's place, leaves the table, lets the bin or
+    the person overlap the plate, the wall or another obstacle, or (with `reach`) puts the drop
+    pose over one of its corners out of the arm's collision-free reach (IK, as the dataset's goals)."""
+    if spec.variant not in MOVING_BIN_FAMILIES or spec.family is not None:
+        raise SuiteError(f"a moving bin runs on the {' and '.join(MOVING_BIN_FAMILIES)} families, not "
+                         f"{spec.variant!r}")
+    lo, hi = region(scenario, spec)
+    c = np.array(spec.bin.center_xy_m, float)
+    where = f"moving bin region {[list(map(float, lo)), list(map(float, hi))]}"
+    if np.any(c < lo) or np.any(c > hi):
+        raise SuiteError(f"{where} must hold the bin's place {list(map(float, c))}")
+    half = np.array(spec.bin.outer_size_m[:2]) / 2
+    r = scenario.person_radius_m
+    p_off = person_offset_m(scenario, spec)
+    sweeps = {"the bin": (lo - half, hi + half), "the person": (lo + p_off - r, hi + p_off + r)}
+    t = spec.table
+    t_lo = np.array(t.center_m[:2]) - np.array(t.size_m[:2]) / 2
+    t_hi = np.array(t.center_m[:2]) + np.array(t.size_m[:2]) / 2
+    b_lo, b_hi = sweeps["the bin"]
+    if np.any(b_lo < t_lo) or np.any(b_hi > t_hi):
+        raise SuiteError(f"{where} takes the bin off the table (x {t_lo[0]:.2f}..{t_hi[0]:.2f}, "
+                         f"y {t_lo[1]:.2f}..{t_hi[1]:.2f} m)")
+    for obstacle in spec.obstacles():
+        if obstacle.name == "table" or obstacle.name.startswith("bin_"):
+            continue
+        o_lo, o_hi = _footprint(obstacle)
+        for who, (s_lo, s_hi) in sweeps.items():
+            if _overlap(s_lo, s_hi, o_lo, o_hi):
+                raise SuiteError(f"{where} lets {who} run into the {obstacle.name}; allowed: a region clear of it")
+    if reach:
+        _check_reach(scenario, spec, lo, hi)
+
+
+def _footprint(obstacle) -> tuple[np.ndarray, np.ndarray]:
+    """An obstacle's axis-aligned footprint in the floor plane (lower, upper (2,))."""
+    X = obstacle.pose()
+    s = obstacle.size_m
+    if obstacle.shape == "box":
+        half = np.abs(X[:3, :3]) @ (np.array(s) / 2)
+    elif obstacle.shape == "cylinder":
+        half = np.full(3, s[0] + s[1] / 2)  # a bound, whatever the axis
+    else:
+        half = np.full(3, s[0])
+    return X[:2, 3] - half[:2], X[:2, 3] + half[:2]
+
+
+def _check_reach(scenario: MovingBinScenario, spec: SceneSpec, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Collision-free IK of the drop pose with the bin at each corner of the region."""
+    from scenes.drake_scene import build_drake_scene
+    from scenes.ik import Q_READY, IkOptions, PoseIk
+    from scenes.scene import Scene
+
+    rng = np.random.default_rng([scenario.seed, 4242])
+    for corner in ((lo[0], lo[1]), (lo[0], hi[1]), (hi[0], lo[1]), (hi[0], hi[1])):
+        moved = Scene(spec_with_bin_at(scenario, spec, corner), 0, ())
+        ik = PoseIk(build_drake_scene(moved, mode="plan", cameras=False))
+        if ik.solve(drop_pose(spec, corner), q_seed=Q_READY, rng=rng, options=IkOptions()) is None:
+            raise SuiteError(f"moving bin region corner ({corner[0]:.2f}, {corner[1]:.2f}) m is out of the arm's "
+                             "reach: no collision-free IK for the drop pose over the bin there; allowed: a "
+                             "region the arm reaches")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class BinPath:
+    """The bin centre's seeded path, sampled every PATH_DT_S: positions (K, 2) m, velocities
+    (K, 2) m/s at times t_s (K,)."""
+
+    t_s: np.ndarray
+    xy_m: np.ndarray
+    v_m_s: np.ndarray
+
+    def at(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """The bin centre (2,) and its velocity (2,) at time t_s (held after the horizon)."""
+        t = min(max(float(t_s), 0.0), float(self.t_s[-1]))
+        i = min(int(t / PATH_DT_S), len(self.t_s) - 2)
+        w = (t - self.t_s[i]) / PATH_DT_S
+        return (1 - w) * self.xy_m[i] + w * self.xy_m[i + 1], (1 - w) * self.v_m_s[i] + w * self.v_m_s[i + 1]
+
+
+def _trapezoid(d: float, v: float, a: float) -> tuple[float, float, float]:
+    """(time to cruise, cruise time, peak speed) of a rest-to-rest move of length d."""
+    if d * a <= v * v:  # never reaches cruise speed: a triangle
+        peak = math.sqrt(d * a)
+        return peak / a, 0.0, peak
+    return v / a, d / v - v / a, v
+
+
+def bin_path(scenario: MovingBinScenario, spec: SceneSpec, *, horizon_s: float = PATH_HORIZON_S) -> BinPath:
+    """The seeded path of the bin centre (see the module docstring)."""
+    t = np.arange(0.0, horizon_s + PATH_DT_S / 2, PATH_DT_S)
+    start = np.array(spec.bin.center_xy_m, float)
+    xy = np.tile(start, (len(t), 1))
+    vel = np.zeros((len(t), 2))
+    v, a = scenario.speed_m_s, scenario.accel_m_s2
+    if v <= 0:
+        return BinPath(t, xy, vel)
+    lo, hi = region(scenario, spec)
+    rng = np.random.default_rng([scenario.seed, 1913])
+    t0, p0 = 0.0, start
+    while t0 < horizon_s:
+        target = rng.uniform(lo, hi)
+        d = float(np.linalg.norm(target - p0))
+        if d < 1e-3:
+            continue
+        u = (target - p0) / d
+        ta, tc, peak = _trapezoid(d, v, a)
+        T = 2 * ta + tc
+        m = (t >= t0) & (t < t0 + T)
+        tau = t[m] - t0
+        s = np.where(tau < ta, 0.5 * a * tau**2,
+                     np.where(tau < ta + tc, 0.5 * a * ta**2 + peak * (tau - ta),
+                              d - 0.5 * a * np.maximum(T - tau, 0.0) ** 2))
+        sd = np.where(tau < ta, a * tau, np.where(tau < ta + tc, peak, a * np.maximum(T - tau, 0.0)))
+        xy[m] = p0 + s[:, None] * u
+        vel[m] = sd[:, None] * u
+        xy[t >= t0 + T] = target
+        vel[t >= t0 + T] = 0.0
+        t0, p0 = t0 + T, target
+    return BinPath(t, xy, vel)
