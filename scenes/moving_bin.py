@@ -75,8 +75,8 @@ class MovingBinScenario:
     estimate_latency_s: NonNeg = 0.1
     estimate_rate_hz: Pos = 10.0
     estimate_noise_m: NonNeg = 0.003
-    velocity_window: PosInt = 5
-    drift_tolerance_m: Pos = 0.03
+    velocity_window: PosInt = 10
+    drift_tolerance_m: Pos = 0.04
     replan_deadline_s: Pos = 0.3
     max_wait_s: Pos = 3.0
     release_margin_m: NonNeg = 0.01

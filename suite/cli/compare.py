@@ -16,6 +16,7 @@ import yaml
 from suite.cli.args import nonneg_int, positive_float, positive_int
 from scenes.errors import SuiteError
 from scenes.schema import load
+from suite.problems import DEFAULT_TIER
 from suite.run.lock import RunLock
 from suite.run.runner import TRIALS_FILE, CompareConfig
 
@@ -28,6 +29,8 @@ FLAG_SETTINGS = tuple(f.name for f in dataclasses.fields(CompareConfig)
                       if f.name not in ("planners", "dataset", "planner_configs", "hard_limit_grace_s"))
 #: Settings of how a run executes, which a resumed run may change (its records do not depend on them).
 HOW_IT_RUNS = ("jobs", "executor", "scheduler", "memory_limit_mb")
+#: The problems a --moving-bin run plans when no scenes are named: the default tier's open and wall.
+DEFAULT_TIER_MOVING = f"{DEFAULT_TIER}:family=open+wall"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -67,11 +70,68 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="execute each planner's plans in physics (Drake) and count the cans recycled")
     p.add_argument("--reperceive", action="store_true",
                    help="with --execute: closed loop, perceive and plan again after each pick")
+    p.add_argument("--moving-bin", type=speed_list, default=None, metavar="V1,V2,...",
+                   help="with --execute: a moving bin held by a person (docs/moving-bin.md) at each of these speeds "
+                        "(m/s; 0 is the static bin through the same replanning loop), on the run's open and wall "
+                        "scenes, instead of the static execution: moving_bin.json and a 'Moving bin' report section "
+                        f"(default scenes: {DEFAULT_TIER_MOVING})")
+    p.add_argument("--moving-bin-scenes", type=positive_int, default=2, metavar="N",
+                   help="with --moving-bin: how many of the run's open and wall scenes (an open, then a wall, ...; "
+                        "default 2)")
+    p.add_argument("--moving-bin-scenario", default=None, metavar="YAML",
+                   help="with --moving-bin: the scenario's other settings (scenes.moving_bin.MovingBinScenario: "
+                        "acceleration, region, estimate latency/rate/noise, drift tolerance, replan deadline, ...)")
     p.add_argument("--no-plots", action="store_true", help="skip drawing the plots")
     p.add_argument("--wide", action="store_true",
                    help="print every metric with its quartiles in the terminal table (about 250 columns)")
     p.add_argument("--no-html", action="store_true", help="skip writing report.html (the one-page report of the run)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def speed_list(text: str) -> tuple[float, ...]:
+    """"0,0.05,0.1" -> (0.0, 0.05, 0.1): bin speeds (m/s), non-negative, finite, distinct, ascending."""
+    from scenes.schema import NonNeg, refusal
+
+    values = []
+    for part in text.split(","):
+        try:
+            v = float(part)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{part.strip()!r} in {text!r} is not a speed in m/s") from None
+        why = refusal(NonNeg, v)
+        if why is not None:
+            raise argparse.ArgumentTypeError(f"bin speed {part.strip()!r} (m/s): {why}")
+        values.append(v)
+    if len(set(values)) != len(values):
+        raise argparse.ArgumentTypeError(f"--moving-bin {text!r} names a speed twice")
+    return tuple(sorted(values))
+
+
+def moving_bin_scenario(args: argparse.Namespace, config: CompareConfig):
+    """The scenario of --moving-bin (its YAML's settings, every field checked), checked against the
+    open and wall stations of the run's spec (region, reach): one SuiteError line before any work."""
+    from scenes.moving_bin import MOVING_BIN_FAMILIES, check_scenario, make_scenario
+    from scenes.spec import load_spec
+
+    if not args.execute:
+        raise SuiteError("--moving-bin runs in physics: add --execute")
+    if args.reperceive or args.budgets:
+        raise SuiteError(f"--moving-bin cannot go with {'--reperceive' if args.reperceive else '--budgets'}: "
+                         "run them apart")
+    values = {}
+    if args.moving_bin_scenario:
+        values = _config_file(args.moving_bin_scenario)
+        if "speed_m_s" in values:
+            raise SuiteError(f"--moving-bin-scenario {args.moving_bin_scenario}: field 'speed_m_s' is set by "
+                             "--moving-bin")
+    where = f"--moving-bin-scenario {args.moving_bin_scenario}: " if args.moving_bin_scenario else "moving bin: "
+    scenario = make_scenario(values, where=where)
+    if not config.dataset and config.variant not in MOVING_BIN_FAMILIES:
+        raise SuiteError(f"a moving bin runs on the {' and '.join(MOVING_BIN_FAMILIES)} families, not --variant "
+                         f"{config.variant!r}")
+    for family in MOVING_BIN_FAMILIES:
+        check_scenario(scenario, load_spec(config.spec, variant=family))
+    return scenario
 
 
 def budget_list(text: str) -> tuple[float, ...]:
@@ -131,6 +191,8 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     if args.dataset is not None:
         values["dataset"] = args.dataset
         given["dataset"] = ("--dataset", args.dataset)
+    elif getattr(args, "moving_bin", None) and not generated and not args.resume and "dataset" not in given:
+        values["dataset"] = DEFAULT_TIER_MOVING
     elif generated:
         values["dataset"] = None
         given["dataset"] = (generated[0], None)
@@ -254,9 +316,9 @@ def resume_command(out: Path) -> str:
     return shlex.join(["python", "-m", "suite", "compare", "--resume", "--out", str(out)])
 
 
-def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, progress_bar: bool) -> None:
-    """Execute every planner's plans for every scene in physics; write execution.json."""
-    from suite.execution.jobs import jobs_from_records, run_jobs, write_execution
+def _execution_jobs(trials, out: Path, config: CompareConfig, *, reperceive: bool, replay_dir):
+    """One execution job per planner and scene, its plans from the run's records."""
+    from suite.execution.jobs import jobs_from_records
     from suite.run.records import read_trials
 
     steps, shared, orders = None, None, None
@@ -267,12 +329,39 @@ def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, prog
         dataset = load_dataset(config.dataset)
         steps, orders = dataset.cycle_steps, dataset.picking_orders
         shared = _shared_steps(trials, steps, pose=pose_settings(dataset.manifest))
-    jobs = jobs_from_records(trials, read_trials(out / TRIALS_FILE), grasps=config.grasps,
+    return jobs_from_records(trials, read_trials(out / TRIALS_FILE), grasps=config.grasps,
                              time_limit_s=config.time_limit_s, seed=config.seed, reperceive=reperceive,
-                             replay_dir=out, cycle_steps=steps, shared_steps=shared, picking_orders=orders)
+                             replay_dir=replay_dir, cycle_steps=steps, shared_steps=shared, picking_orders=orders)
+
+
+def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, progress_bar: bool) -> None:
+    """Execute every planner's plans for every scene in physics; write execution.json."""
+    from suite.execution.jobs import run_jobs, write_execution
+
+    jobs = _execution_jobs(trials, out, config, reperceive=reperceive, replay_dir=out)
     print(f"executing {len(jobs)} plan(s) in physics ({'closed loop' if reperceive else 'open loop'})...",
           file=sys.stderr)
     write_execution(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar))
+
+
+def _execute_moving_bin(trials, out: Path, config: CompareConfig, *, speeds, scenario, scenes: int,
+                        progress_bar: bool) -> None:
+    """The moving-bin sweep: every planner on the run's first open and wall scenes at every speed;
+    write moving_bin.json (and a replay of each planner's episode on the first scene at the middle
+    speed)."""
+    from suite.execution.jobs import run_jobs
+    from suite.execution.moving_bin import run_moving_bin_job, sweep_jobs, write_moving_bin
+
+    mine = [t for t in trials if t.problem.scene.variant in ("open", "wall")]
+    base = _execution_jobs(mine, out, config, reperceive=False, replay_dir=None)
+    replay_speed = speeds[len(speeds) // 2]
+    jobs = sweep_jobs(base, speeds=speeds, scenario=scenario, scenes=scenes, replay_dir=out,
+                      replay_speed=replay_speed)
+    n_scenes = len({j.scene.key() for j in jobs})
+    print(f"moving bin: {len(jobs)} episode(s) ({n_scenes} scene(s) x {len(speeds)} speed(s) x "
+          f"{len(config.planners)} planner(s))...", file=sys.stderr)
+    write_moving_bin(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar, run=run_moving_bin_job,
+                                   desc="moving bin"))
 
 
 def _shared_steps(trials, steps, *, pose: dict) -> dict:
@@ -307,11 +396,12 @@ def run(args: argparse.Namespace) -> int:
     from suite.run.runner import update_manifest
 
     config = resolve_config(args)
+    scenario = moving_bin_scenario(args, config) if getattr(args, "moving_bin", None) else None
     before = frozenset(c.pid for c in multiprocessing.active_children())
     with SignalGuard():
         out, lock = prepare_out(args)
         try:
-            return _run_locked(args, config, out)
+            return _run_locked(args, config, out, scenario=scenario)
         except Interrupted as exc:
             counts = _recorded_counts(out)
             update_manifest(out, status="interrupted", interrupted_by=exc.name, stopped_utc=_now(), **counts)
@@ -346,7 +436,7 @@ def _recorded_counts(out: Path) -> dict[str, int | None]:
     return {"trials_recorded": recorded, "trials_total": _TOTAL_TRIALS.get(str(out))}
 
 
-def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path) -> int:
+def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path, *, scenario=None) -> int:
     """The run, with `out` locked: manifest, problems, trials, execution, report."""
     from suite.run.executors import cap_workers
     from suite.run.runner import (
@@ -391,12 +481,18 @@ def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path) -> i
                 executor.abort()
             raise
     _TOTAL_TRIALS[str(out)] = len(trials)
+    if scenario is not None and not any(t.problem.scene.variant in ("open", "wall") for t in trials):
+        raise SuiteError("--moving-bin runs on open and wall scenes; this run has none (select them, e.g. "
+                         f"--dataset {DEFAULT_TIER_MOVING}, or --variant open)")
     counts = run_trials(trials, out=out, jobs=config.jobs, executor=executor,
                         scheduler=config.scheduler, progress_bar=not args.no_progress,
                         hard_limit_grace_s=config.hard_limit_grace_s)
     update_manifest(out, status="complete", finished_utc=_now(),
                     trials_recorded=counts["skipped"] + counts["ran"], trials_total=counts["total"])
-    if args.execute or args.reperceive:
+    if scenario is not None:
+        _execute_moving_bin(trials, out, config, speeds=args.moving_bin, scenario=scenario,
+                            scenes=args.moving_bin_scenes, progress_bar=not args.no_progress)
+    elif args.execute or args.reperceive:
         _execute(trials, out, config, reperceive=args.reperceive, progress_bar=not args.no_progress)
     from suite.report.write import write_report
 

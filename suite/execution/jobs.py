@@ -282,8 +282,11 @@ def read_execution(run_dir: str | Path) -> list[dict[str, Any]]:
     return json.loads(path.read_text(encoding="utf-8"))["executions"]
 
 
-def run_jobs(jobs: Sequence[ExecutionJob], *, workers: int, progress_bar: bool = True) -> list[dict[str, Any]]:
-    """Run execution jobs in `workers` spawned processes; records in the jobs' order."""
+def run_jobs(jobs: Sequence[Any], *, workers: int, progress_bar: bool = True, run=None,
+             desc: str = "execution") -> list[dict[str, Any]]:
+    """Run execution jobs in `workers` spawned processes; records in the jobs' order. `run` is the
+    module-level function that runs one job and returns its record (default `run_execution`; it
+    catches its own errors, as `suite.execution.moving_bin.run_moving_bin_job` does)."""
     import concurrent.futures as cf
     import multiprocessing as mp
 
@@ -293,24 +296,28 @@ def run_jobs(jobs: Sequence[ExecutionJob], *, workers: int, progress_bar: bool =
     from suite.run.runner import worker_init
 
     results: list[dict[str, Any] | None] = [None] * len(jobs)
-    bar = tqdm(total=len(jobs), desc="execution", unit="run", disable=not progress_bar,
+    bar = tqdm(total=len(jobs), desc=desc, unit="run", disable=not progress_bar,
                file=sys.stderr, dynamic_ncols=True)
     if workers <= 1 or len(jobs) <= 1:
         worker_init()
         for i, job in enumerate(jobs):
-            results[i] = _guarded(job)
+            results[i] = _guarded(job) if run is None else run(job)
             bar.update(1)
     else:
         with cf.ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=mp.get_context("spawn"),
                                     initializer=worker_init) as pool:
             with signals_blocked():  # the pool spawns its workers as jobs are submitted
-                futures = {pool.submit(_guarded, job): i for i, job in enumerate(jobs)}
+                futures = {pool.submit(_guarded if run is None else run, job): i for i, job in enumerate(jobs)}
             for fut in cf.as_completed(futures):
                 i = futures[fut]
                 try:
                     results[i] = fut.result()
                 except Exception as exc:  # the worker process died
                     results[i] = _failed(jobs[i], f"{type(exc).__name__}: {exc}")
+                    if run is not None:  # a moving-bin episode's record
+                        scenario = getattr(jobs[i], "scenario", None)
+                        results[i].update(status="error", reason=results[i]["error"],
+                                          speed_m_s=getattr(scenario, "speed_m_s", None))
                 rec = results[i]
                 bar.set_postfix_str(f"{rec['planner']} seed {rec['scene_seed']}: "
                                     f"{rec.get('cans_in_bin', 0)}/{rec['cans_total']} in bin", refresh=False)
@@ -329,5 +336,5 @@ def _guarded(job: ExecutionJob) -> dict[str, Any]:
 
 def _failed(job: ExecutionJob, message: str) -> dict[str, Any]:
     return {"planner": job.planner, "scene_seed": job.scene.seed, "variant": job.scene.variant,
-            "cans_total": len(job.scene.cans), "error": message, "grasps": job.grasps,
-            "reperceive": job.reperceive}
+            "cans_total": len(job.scene.cans), "error": message, "grasps": getattr(job, "grasps", None),
+            "reperceive": getattr(job, "reperceive", False)}

@@ -56,7 +56,7 @@ NOT_APPLICABLE = {
     "prm-roadmap-shortcut": "its roadmap is built offline once per fixed world (as prm-roadmap's)",
 }
 #: A first guess of a transit's duration (s), before one was timed.
-TRANSIT_GUESS_S = 2.5
+TRANSIT_GUESS_S = 1.5
 #: Kept replan events per record.
 MAX_EVENTS = 400
 
@@ -552,6 +552,10 @@ def run_moving_bin(job: MovingBinJob, *, planner=None) -> MovingBinRecord:
                                job.scenario.to_json(), "not_applicable", NOT_APPLICABLE[job.planner],
                                cans_total=len(job.scene.cans))
     check_scenario(job.scenario, job.scene.spec, reach=False)
+    if len(job.q_home) != 7:
+        return MovingBinRecord(job.planner, job.scene.seed, job.scene.variant, job.scenario.speed_m_s,
+                               job.scenario.to_json(), "error", "no plan of this scene to execute",
+                               cans_total=len(job.scene.cans))
     if planner is None:
         from planners.registry import planner_class
         from suite.run.trial import make_config
@@ -611,3 +615,67 @@ def plan_scene_job(scene: Scene, scenario: MovingBinScenario, *, planner: str, p
     return MovingBinJob(planner=planner, planner_config=planner_config, scene=scene, scenario=scenario,
                         cans=tuple(cans), q_home=tuple(float(v) for v in problems[0].q_start),
                         time_limit_s=time_limit_s, seed=seed, replay_path=replay_path, config=config)
+
+
+def select_scenes(jobs: Sequence[Any], count: int) -> list[str]:
+    """The keys of up to `count` open or wall scenes among execution jobs: the first of each
+    family in turn (an open and a wall station before a second open), in the jobs' order."""
+    by_family: dict[str, list[str]] = {}
+    for job in jobs:
+        key = job.scene.key()
+        if job.scene.variant in ("open", "wall") and key not in by_family.setdefault(job.scene.variant, []):
+            by_family[job.scene.variant].append(key)
+    out: list[str] = []
+    while len(out) < count and any(by_family.values()):
+        for family in ("open", "wall"):
+            if by_family.get(family) and len(out) < count:
+                out.append(by_family[family].pop(0))
+    return out
+
+
+def sweep_jobs(exec_jobs: Sequence[Any], *, speeds: Sequence[float], scenario: MovingBinScenario, scenes: int,
+               replay_dir=None, replay_speed: float | None = None) -> list[MovingBinJob]:
+    """One moving-bin job per planner, selected scene and speed, from a comparison's execution jobs
+    (`suite.execution.jobs.jobs_from_records`: their approach, descend and lift paths). Each
+    planner's episode on the first scene at `replay_speed` records a Meshcat replay into
+    `replay_dir` (replay_moving_bin_<planner>.html)."""
+    from pathlib import Path
+
+    keys = select_scenes(exec_jobs, scenes)
+    out, replayed = [], set()
+    for key in keys:
+        for job in (j for j in exec_jobs if j.scene.key() == key):
+            for speed in speeds:
+                replay = None
+                if replay_dir is not None and speed == replay_speed and job.planner not in replayed:
+                    replayed.add(job.planner)
+                    replay = str(Path(replay_dir) / f"replay_moving_bin_{job.planner}.html")
+                out.append(MovingBinJob(
+                    planner=job.planner, planner_config=job.planner_config, scene=job.scene,
+                    scenario=dataclasses.replace(scenario, speed_m_s=float(speed)), cans=job.cans or (),
+                    q_home=job.q_home or (), time_limit_s=job.time_limit_s, seed=job.seed, replay_path=replay,
+                    config=job.config))
+    return out
+
+
+def write_moving_bin(out, records: Sequence[dict[str, Any]]) -> Any:
+    """Write the run's moving_bin.json (atomically)."""
+    import json
+    from pathlib import Path
+
+    path = Path(out) / MOVING_BIN_FILE
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps({"format_version": 1, "moving_bin": list(records)}, indent=1), encoding="utf-8")
+    tmp.replace(path)
+    return path
+
+
+def read_moving_bin(run_dir) -> list[dict[str, Any]]:
+    """The moving-bin records of a run ([] when it ran none)."""
+    import json
+    from pathlib import Path
+
+    path = Path(run_dir) / MOVING_BIN_FILE
+    if not path.exists():
+        return []
+    return json.loads(path.read_text(encoding="utf-8"))["moving_bin"]
