@@ -29,8 +29,10 @@ if TYPE_CHECKING:
 
 #: The families a moving bin runs on: the paper's station and its wall variant.
 MOVING_BIN_FAMILIES = ("open", "wall")
-#: Half-size (m) of the default region around the spec's bin centre (x, y).
-DEFAULT_REGION_HALF_M = (0.08, 0.08)
+#: The default region around the spec's bin centre: its lower and upper corners' offsets (m). It
+#: reaches further toward the robot base, where the arm still reaches the drop pose (on open and
+#: wall: x 0.20..0.46, y 0.40..0.62; 2 cm more outward leaves the far corner out of reach).
+DEFAULT_REGION_OFFSETS_M = ((-0.16, -0.12), (0.10, 0.10))
 #: The bin path's sample spacing (s) and length (s); beyond it the bin stands at its last place.
 PATH_DT_S = 0.01
 PATH_HORIZON_S = 900.0
@@ -42,9 +44,12 @@ class MovingBinScenario:
 
     Attributes:
         speed_m_s: the bin's cruise speed (0: it stands still, the static bin).
-        accel_m_s2: its acceleration and braking limit.
+        accel_m_s2: its acceleration and braking limit (a person walking with a load: 1-2 m/s^2;
+            the bin stops at each target, so at high speeds it cruises only part of the time:
+            the records give its mean speed too).
         region_m: the box its centre stays in, ((x_lo, y_lo), (x_hi, y_hi)) in metres; None for
-            the spec's bin centre +- DEFAULT_REGION_HALF_M. It must hold the spec's bin centre.
+            the spec's bin centre offset by DEFAULT_REGION_OFFSETS_M. It must hold the spec's bin
+            centre.
         seed: the seed of the path's target points and of the estimate noise.
         person_radius_m, person_height_m: the standing cylinder holding the bin.
         person_gap_m: its gap to the bin's outer wall, on the side away from the robot base.
@@ -66,7 +71,7 @@ class MovingBinScenario:
     """
 
     speed_m_s: NonNeg = 0.1
-    accel_m_s2: Pos = 0.5
+    accel_m_s2: Pos = 2.0
     region_m: tuple[Vec2, Vec2] | None = None
     seed: NonNegInt = 0
     person_radius_m: Pos = 0.2
@@ -107,8 +112,8 @@ def region(scenario: MovingBinScenario, spec: SceneSpec) -> tuple[np.ndarray, np
     if scenario.region_m is not None:
         return np.array(scenario.region_m[0], float), np.array(scenario.region_m[1], float)
     c = np.array(spec.bin.center_xy_m, float)
-    h = np.array(DEFAULT_REGION_HALF_M)
-    return c - h, c + h
+    lo, hi = (np.array(o) for o in DEFAULT_REGION_OFFSETS_M)
+    return c + lo, c + hi
 
 
 def person_offset_m(scenario: MovingBinScenario, spec: SceneSpec) -> np.ndarray:
@@ -225,6 +230,11 @@ class BinPath:
     t_s: np.ndarray
     xy_m: np.ndarray
     v_m_s: np.ndarray
+
+    def mean_speed_m_s(self, until_s: float) -> float:
+        """The bin's mean speed from 0 to until_s."""
+        n = max(2, min(len(self.t_s), int(until_s / PATH_DT_S) + 1))
+        return float(np.mean(np.linalg.norm(self.v_m_s[:n], axis=1)))
 
     def at(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """The bin centre (2,) and its velocity (2,) at time t_s (held after the horizon)."""

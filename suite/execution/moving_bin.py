@@ -49,11 +49,9 @@ log = logging.getLogger(__name__)
 MOVING_BIN_FILE = "moving_bin.json"
 #: Planners the loop cannot run, with the reason (their offline preparation is tied to the world).
 NOT_APPLICABLE = {
-    "gcs": "its convex regions are built offline for a fixed world (minutes per world); the bin and the "
-           "person move them, and rebuilding them within a replan deadline is out of reach",
-    "prm-roadmap": "its roadmap is built offline once per fixed world and never changed by a query; "
-                   "the moving bin and person invalidate its edges",
-    "prm-roadmap-shortcut": "its roadmap is built offline once per fixed world (as prm-roadmap's)",
+    "gcs": "its convex regions are built offline for one fixed world",
+    "prm-roadmap": "its roadmap is built offline for one fixed world",
+    "prm-roadmap-shortcut": "its roadmap is built offline for one fixed world",
 }
 #: A first guess of a transit's duration (s), before one was timed.
 TRANSIT_GUESS_S = 1.5
@@ -123,7 +121,9 @@ class CanEpisode:
 class MovingBinRecord:
     """One planner's episode on one scene at one bin speed (`to_json` for moving_bin.json).
 
-    status is "ok", "not_applicable" (the planner cannot run the loop: `reason`) or "error"."""
+    status is "ok", "not_applicable" (the planner cannot run the loop: `reason`) or "error".
+    speed_m_s is the bin's cruise speed; bin_mean_speed_m_s its mean over the episode (it stops at
+    each target point)."""
 
     planner: str
     scene_seed: int
@@ -132,6 +132,7 @@ class MovingBinRecord:
     scenario: dict[str, Any]
     status: str
     reason: str = ""
+    bin_mean_speed_m_s: float | None = None
     cans_total: int = 0
     cans_attempted: int = 0
     cans_in_bin: int = 0
@@ -527,6 +528,7 @@ class _Episode:
         return MovingBinRecord(
             planner=job.planner, scene_seed=job.scene.seed, variant=job.scene.variant,
             speed_m_s=self.s.speed_m_s, scenario=self.s.to_json(), status="ok",
+            bin_mean_speed_m_s=self.path.mean_speed_m_s(self.stream.duration_s),
             cans_total=len(job.scene.cans), cans_attempted=len(self.attempted),
             cans_in_bin=sum(f.where == "bin" for f in fates), cans_released=len(released),
             cans_given_up=sum(1 for c in self.cans if not c.released),

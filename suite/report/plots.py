@@ -4,7 +4,8 @@ Each planner keeps one colour in every figure (`plots_common.planner_colors`). `
 draws: metric box plots, the natural-poses panel, outcomes by status, the planning-time CDF
 (`plots_stats`), success rate and length ratio per scene family (`plots_families`), the gripper's
 paths over the scene (top and side views) and the timed joint position and velocity profiles of
-one motion (`plots_paths`), and where the cans ended in physics (`plots_execution`).
+one motion (`plots_paths`), where the cans ended in physics (`plots_execution`), and the moving bin
+(`plots_moving_bin`).
 """
 
 from __future__ import annotations
@@ -86,6 +87,13 @@ def plot_jobs(run_dir: str | Path, *, records: Sequence[dict] | None = None, exe
     jobs.append((plot_time_attribution, (records,), {**common, "path": out_dir / "time_attribution.png"}))
     if executions:
         jobs.append((plot_execution, (executions,), {**common, "path": out_dir / "execution.png"}))
+    from suite.execution.moving_bin import read_moving_bin
+
+    moving = read_moving_bin(run_dir)
+    if moving:
+        from suite.report.plots_moving_bin import plot_moving_bin
+
+        jobs.append((plot_moving_bin, (moving,), {**common, "path": out_dir / "moving_bin.png"}))
     if budget_records:
         from suite.report.budgets import plot_budget_curves
 

@@ -157,6 +157,7 @@ def write_summary(
     budget_records: Sequence[dict[str, Any]] = (),
     summary: RunSummary | None = None,
     pairs: Sequence[PairedComparison] | None = None,
+    moving_bin: Sequence[dict[str, Any]] = (),
 ) -> list[Path]:
     """Write summary.md, summary.json, summary.csv (per planner, per planner x kind, per planner x
     family) and paired.csv.
@@ -168,6 +169,7 @@ def write_summary(
         seed: seeds the bootstrap's generator, so the written CIs are reproducible.
         title: the summary's heading (default: "Run summary: <run directory name>").
         executions: the run's physics execution records (execution.json), if it was executed.
+        moving_bin: the run's moving-bin episodes (moving_bin.json), if it ran any.
         budget_records: a run at several budgets: its records with their own planner names (adds
             the per-budget table; `records` then name each planner and budget apart).
         summary, pairs: the records' `summarize_run` and `paired_comparisons` if the caller has them
@@ -194,6 +196,10 @@ def write_summary(
                + budget_table(budget_records, planners=planners_in(budget_records)) + "\n")
     if executions:
         md += "\n" + EXECUTION_INTRO + "\n" + execution_table(executions, planners=planners) + "\n"
+    if moving_bin:
+        from suite.report.summary_moving_bin import MOVING_BIN_INTRO, moving_bin_table
+
+        md += "\n" + MOVING_BIN_INTRO + "\n" + moving_bin_table(moving_bin, planners=planners) + "\n"
     md_path.write_text(md, encoding="utf-8")
     json_path.write_text(json.dumps(summary_json(records, pairs=pairs, planners=planners, summary=summary), indent=1)
                          + "\n", encoding="utf-8")

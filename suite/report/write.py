@@ -53,6 +53,10 @@ def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, 
     from suite.report.summary_stats import paired_comparisons, summarize_run
 
     executions = read_execution(run_dir)
+    from suite.execution.moving_bin import read_moving_bin
+    from suite.report.summary_moving_bin import moving_bin_table
+
+    moving = read_moving_bin(run_dir)
     drawing = None
     if plots:  # the figures start first, most of them in a second process, while the tables are written
         from suite.report.plots import start_plots
@@ -61,7 +65,7 @@ def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, 
     summary = summarize_run(records, planners=planners)
     pairs = paired_comparisons(records, rng=np.random.default_rng(seed), planners=planners)
     written = write_summary(run_dir, records, planners=planners, seed=seed, executions=executions,
-                            budget_records=budget_records, summary=summary, pairs=pairs)
+                            budget_records=budget_records, summary=summary, pairs=pairs, moving_bin=moving)
     written += write_arena_logs(run_dir, records=records)
     if drawing is not None:
         written += drawing.finish()
@@ -74,4 +78,6 @@ def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, 
     table = summary_table(records, planners=planners, wide=wide)
     if executions:
         table += "\n\nExecution in physics:\n" + execution_table(executions, planners=planners, tablefmt="simple")
+    if moving:
+        table += "\n\nMoving bin:\n" + moving_bin_table(moving, planners=planners, tablefmt="simple")
     return table

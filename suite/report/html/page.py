@@ -92,6 +92,12 @@ def render(
         nav.append(("execution", "Execution"))
         body.append(_section("execution", "Execution in physics",
                              sections.execution_html(run_dir, executions, planners)))
+    from suite.execution.moving_bin import read_moving_bin
+
+    moving = read_moving_bin(run_dir)
+    if moving:
+        nav.append(("moving_bin", "Moving bin"))
+        body.append(_section("moving_bin", "Moving bin", sections.moving_bin_html(run_dir, moving, planners)))
     figures = sections.figures(run_dir, "figures")
     if figures:
         nav.append(("figures", "More figures"))
@@ -116,7 +122,7 @@ def render(
         f"{sections.headline_facts(run_dir, manifest, records, planners)}</header>"
         f'<nav>{links}</nav><main>{"".join(body)}</main>'
         f'<footer>Written {stamp} by <code>python -m suite report</code> from the run directory\'s files alone '
-        "(trials.jsonl, manifest.json, plots/, execution.json); self-contained: no network, no server.</footer>"
+        "(trials.jsonl, manifest.json, plots/, execution.json, moving_bin.json); self-contained: no network, no server.</footer>"
         f'<script type="application/json" id="report-data">{payload}</script>'
         f"<script>{js}</script></body></html>\n"
     )

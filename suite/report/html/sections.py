@@ -50,6 +50,9 @@ FIGURES: dict[str, tuple[str, str]] = {
     "time_attribution.png": ("figures", "Where planning time goes: the share spent in collision queries."),
     "budget_curves.png": ("figures", "Success and length against the planning budget."),
     "execution.png": ("execution", "Where the cans ended after execution in physics."),
+    "moving_bin.png": ("moving_bin", "Cans in the bin against bin speed per planner (95% Wilson intervals), and why "
+                                     "cans were lost: replan latency against the deadline, deadline misses and failed "
+                                     "replans, contacts with the bin or the person."),
 }
 
 
@@ -250,4 +253,21 @@ def execution_html(run_dir: Path, executions: Sequence[dict[str, Any]], planners
         table(*execution_rows(executions, planners=planners)),
         figures(run_dir, "execution"),
         f"<p>Physics replays written by the run (Meshcat, open beside this file):</p><ul>{links}</ul>" if links else "",
+    ])
+
+
+def moving_bin_html(run_dir: Path, records: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:
+    """moving_bin.json's table, its figure and the episodes' Meshcat replays."""
+    from suite.report.summary_moving_bin import MOVING_BIN_INTRO, moving_bin_rows
+
+    text = MOVING_BIN_INTRO.split("\n", 2)[2]  # without its markdown heading
+    replays = sorted(run_dir.glob("replay_moving_bin_*.html"))
+    links = "".join(f'<li><a href="{esc(p.name)}">{esc(p.name)}</a> ({p.stat().st_size / 1e6:.1f} MB)</li>'
+                    for p in replays)
+    return "".join([
+        inline_md(" ".join(text.split("\n"))),
+        table(*moving_bin_rows(records, planners=planners)),
+        figures(run_dir, "moving_bin"),
+        f"<p>One episode per planner (Meshcat, open beside this file; the bin and the person move):</p><ul>{links}</ul>"
+        if links else "",
     ])
