@@ -350,7 +350,8 @@ def _execute_moving_bin(trials, out: Path, config: CompareConfig, *, speeds, sce
     write moving_bin.json (and a replay of each planner's episode on the first scene at the middle
     speed)."""
     from suite.execution.jobs import run_jobs
-    from suite.execution.moving_bin import run_moving_bin_job, sweep_jobs, write_moving_bin
+    from suite.execution.jobs import write_moving_bin
+    from suite.execution.moving_bin import run_moving_bin_job, sweep_jobs
 
     mine = [t for t in trials if t.problem.scene.variant in ("open", "wall")]
     base = _execution_jobs(mine, out, config, reperceive=False, replay_dir=None)

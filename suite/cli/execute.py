@@ -93,7 +93,8 @@ def _moving_bin(args: argparse.Namespace, scene, out: Path, cls, config) -> int:
     from scenes.moving_bin import check_scenario, make_scenario
     from suite.cli.compare import _config_file
     from suite.execution.jobs import run_jobs
-    from suite.execution.moving_bin import plan_scene_job, run_moving_bin_job, write_moving_bin
+    from suite.execution.jobs import write_moving_bin
+    from suite.execution.moving_bin import plan_scene_job, run_moving_bin_job
     from suite.run.trial import config_dict, make_config
 
     if args.moving_bin is None:

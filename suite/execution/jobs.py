@@ -29,6 +29,8 @@ from suite.run.records import FINAL_RETURN_NOT_EXECUTED
 log = logging.getLogger(__name__)
 
 EXECUTION_FILE = "execution.json"
+#: A run's moving-bin episodes (`suite.execution.moving_bin.MovingBinRecord.to_json` each).
+MOVING_BIN_FILE = "moving_bin.json"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -338,3 +340,20 @@ def _failed(job: ExecutionJob, message: str) -> dict[str, Any]:
     return {"planner": job.planner, "scene_seed": job.scene.seed, "variant": job.scene.variant,
             "cans_total": len(job.scene.cans), "error": message, "grasps": getattr(job, "grasps", None),
             "reperceive": getattr(job, "reperceive", False)}
+
+
+def write_moving_bin(out: Path, records: Sequence[dict[str, Any]]) -> Path:
+    """Write the run's moving_bin.json (atomically)."""
+    path = Path(out) / MOVING_BIN_FILE
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps({"format_version": 1, "moving_bin": list(records)}, indent=1), encoding="utf-8")
+    tmp.replace(path)
+    return path
+
+
+def read_moving_bin(run_dir) -> list[dict[str, Any]]:
+    """The moving-bin records of a run ([] when it ran none)."""
+    path = Path(run_dir) / MOVING_BIN_FILE
+    if not path.exists():
+        return []
+    return json.loads(path.read_text(encoding="utf-8"))["moving_bin"]

@@ -46,7 +46,6 @@ from suite.execution.replan import OnlinePlan, plan_online
 
 log = logging.getLogger(__name__)
 
-MOVING_BIN_FILE = "moving_bin.json"
 #: Planners the loop cannot run, with the reason (their offline preparation is tied to the world).
 NOT_APPLICABLE = {
     "gcs": "its convex regions are built offline for one fixed world",
@@ -658,26 +657,3 @@ def sweep_jobs(exec_jobs: Sequence[Any], *, speeds: Sequence[float], scenario: M
                     q_home=job.q_home or (), time_limit_s=job.time_limit_s, seed=job.seed, replay_path=replay,
                     config=job.config))
     return out
-
-
-def write_moving_bin(out, records: Sequence[dict[str, Any]]) -> Any:
-    """Write the run's moving_bin.json (atomically)."""
-    import json
-    from pathlib import Path
-
-    path = Path(out) / MOVING_BIN_FILE
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"format_version": 1, "moving_bin": list(records)}, indent=1), encoding="utf-8")
-    tmp.replace(path)
-    return path
-
-
-def read_moving_bin(run_dir) -> list[dict[str, Any]]:
-    """The moving-bin records of a run ([] when it ran none)."""
-    import json
-    from pathlib import Path
-
-    path = Path(run_dir) / MOVING_BIN_FILE
-    if not path.exists():
-        return []
-    return json.loads(path.read_text(encoding="utf-8"))["moving_bin"]

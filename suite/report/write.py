@@ -53,7 +53,7 @@ def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, 
     from suite.report.summary_stats import paired_comparisons, summarize_run
 
     executions = read_execution(run_dir)
-    from suite.execution.moving_bin import read_moving_bin
+    from suite.execution.jobs import read_moving_bin
     from suite.report.summary_moving_bin import moving_bin_table
 
     moving = read_moving_bin(run_dir)
