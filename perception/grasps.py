@@ -126,6 +126,9 @@ class CanDetection:
         grasp: the grasp and pre-grasp the shared rule gives for this estimate.
         n_points: how many vertical-normal points the estimate rests on.
         area_px: the component's area in the image, pixels.
+        confidence: the robust pipeline's support for the estimate in [0, 1] (the fraction of an
+            upright can's rim its circle fit covers, or of a lying can's length its upper half
+            spans); 1.0 from the paper's pipeline, which has no such measure.
     """
 
     id: int
@@ -136,6 +139,7 @@ class CanDetection:
     grasp: Grasp
     n_points: int
     area_px: int
+    confidence: float = 1.0
 
     def to_json(self) -> dict:
         return {

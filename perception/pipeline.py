@@ -9,10 +9,14 @@ import numpy as np
 
 from perception.grasps import CanDetection, FrameAnalysis, PerceptionParams, analyse_frame, detect_cans
 from perception.observe import observe
+from scenes.errors import SuiteError
 from scenes.scene import Scene
+from scenes.sensor import SensorSpec
 
 #: the camera whose frame gives the grasps (the paper's: one camera above the plate)
 GRASP_CAMERA = "top"
+#: the pipelines: the paper's (the default) and the robust one (`perception.robust`)
+PIPELINES = ("paper", "robust")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -30,6 +34,7 @@ class PerceptionResult:
     render_time_s: float
     process_time_s: float
     frames: dict[str, FrameAnalysis]
+    plate_noise_m: float | None = None
 
 
 def perceive(
@@ -39,6 +44,8 @@ def perceive(
     rng: np.random.Generator | None = None,
     all_cameras: bool = False,
     params: PerceptionParams = PerceptionParams(),
+    pipeline: str = "paper",
+    sensor: SensorSpec | None = None,
 ) -> PerceptionResult:
     """Render the scene and detect its cans.
 
@@ -48,16 +55,31 @@ def perceive(
             a perfect sensor.
         rng: the noise's generator (required when `depth_noise_m` > 0).
         all_cameras: also crop, segment and analyse the other cameras (for the debug images).
-        params: pipeline settings.
+        params: pipeline settings (the robust pipeline runs with them as its base).
+        pipeline: `paper` or `robust`.
+        sensor: the cameras' sensor model for this pass (default: the spec's, or `depth_noise_m`).
     """
+    if pipeline not in PIPELINES:
+        raise SuiteError(f"unknown perception pipeline {pipeline!r}; allowed: {', '.join(PIPELINES)}")
     cams = None if all_cameras else [GRASP_CAMERA]
     t0 = time.perf_counter()
-    images = observe(scene, cameras=cams, depth_noise_m=depth_noise_m, rng=rng)
+    images = observe(scene, cameras=cams, depth_noise_m=depth_noise_m, rng=rng, sensor=sensor)
     t1 = time.perf_counter()
-    detections, fa = detect_cans(images[GRASP_CAMERA], scene.spec, params)
+    detections, fa, noise = detect(images[GRASP_CAMERA], scene.spec, params=params, pipeline=pipeline)
     t2 = time.perf_counter()
     frames = {GRASP_CAMERA: fa}
     for name, image in images.items():
         if name != GRASP_CAMERA:
             frames[name] = analyse_frame(image, scene.spec, params)
-    return PerceptionResult(tuple(detections), t1 - t0, t2 - t1, frames)
+    return PerceptionResult(tuple(detections), t1 - t0, t2 - t1, frames, noise)
+
+
+def detect(image, spec, *, params: PerceptionParams = PerceptionParams(), pipeline: str = "paper"):
+    """One top-camera frame through the named pipeline: (detections, frame analysis, the plate noise
+    the robust pipeline measured in metres, None for the paper's)."""
+    if pipeline == "robust":
+        from perception.robust import RobustParams, detect_cans_robust
+
+        return detect_cans_robust(image, spec, RobustParams(base=params))
+    detections, fa = detect_cans(image, spec, params)
+    return detections, fa, None

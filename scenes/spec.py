@@ -20,6 +20,7 @@ from pydantic import Field
 from scenes.errors import SuiteError
 from scenes.robot_model import DEFAULT_ROBOT, ROBOTS
 from scenes.schema import FieldError, NonNeg, NonNegInt, Pos, PosInt, PosVec3, Rgba, Unit, Vec2, Vec3, load
+from scenes.sensor import SensorSpec
 
 DEFAULT_SPEC_PATH = Path(__file__).parent / "specs" / "default.yaml"
 
@@ -197,6 +198,9 @@ class CameraSpec:
     fov_y_deg: Annotated[float, Field(gt=0, lt=180)]
     clipping_m: tuple[Pos, Pos]
     poses: Annotated[dict[str, CameraPose], Field(min_length=1)]
+    #: what a real sensor does to the rendered frames (`scenes.sensor`); None: a perfect sensor.
+    #: Left out of `SceneSpec.to_dict` while None, so scene keys do not change.
+    sensor: SensorSpec | None = None
 
     def __post_init__(self):
         if self.clipping_m[0] >= self.clipping_m[1]:
@@ -304,6 +308,8 @@ class SceneSpec:
             del d["robot"]
         if d["region_seeds"] is None:
             del d["region_seeds"]
+        if d["cameras"]["sensor"] is None:
+            del d["cameras"]["sensor"]
         if d["bin"]["floor_thickness_m"] is None:
             del d["bin"]["floor_thickness_m"]
         return d

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from scenes.sensor import SENSOR_PRESETS
 from suite.cli.args import add_scene_arguments, nonneg_float, positive_int, scene_from_args, spec_from_args
 
 if TYPE_CHECKING:
@@ -31,6 +32,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="Gaussian depth noise sigma in metres, with 1%% of depth pixels dropped (default 0)")
     p.add_argument("--segmentation", choices=("color", "geometric"), default="color",
                    help="color: the paper's HSV rule (default); geometric: colour-free RANSAC plane removal")
+    p.add_argument("--pipeline", choices=("paper", "robust"), default="paper",
+                   help="paper: the seed paper's (default); robust: denoised depth, robust fits and a confidence "
+                        "that refuses unsupported detections (docs/perception.md)")
+    p.add_argument("--sensor", choices=sorted(SENSOR_PRESETS), default=None,
+                   help="the cameras' sensor model (scenes/sensor.py): kinect-v1 is Khoshelham & Elberink's "
+                        "structured-light calibration (default: the spec's, a perfect sensor)")
+    p.add_argument("--sweep", metavar="DIR",
+                   help="with --evaluate --scenes N: every pipeline at every noise level of the sweep "
+                        "(Gaussian and structured-light), one JSON per run and noise_sweep.png in DIR")
 
 
 def _noise_rng(seed: int) -> np.random.Generator:
@@ -41,6 +51,15 @@ def _params(args: argparse.Namespace):
     from perception.grasps import PerceptionParams
 
     return PerceptionParams(segmentation=args.segmentation)
+
+
+def _sensor(args: argparse.Namespace):
+    """The sensor named by --sensor (None: the spec's, or --depth-noise-m's Gaussian)."""
+    from scenes.errors import SuiteError
+
+    if args.sensor is not None and args.depth_noise_m > 0:
+        raise SuiteError(f"--sensor {args.sensor} cannot go with --depth-noise-m {args.depth_noise_m}: choose one sensor model")
+    return SENSOR_PRESETS[args.sensor] if args.sensor else None
 
 
 def _scene_record(seed: int, m: SceneMatch) -> dict:
@@ -64,13 +83,19 @@ def run(args: argparse.Namespace) -> int:
         raise SuiteError(f"--scenes {args.scenes} needs --evaluate (several scenes are only evaluated)")
     if args.scenes > 1 and args.images:
         raise SuiteError("--images writes one scene's images; use it without --scenes")
+    if args.sweep:
+        if not args.evaluate:
+            raise SuiteError(f"--sweep {args.sweep} needs --evaluate (a sweep is evaluated against the ground truth)")
+        from suite.cli.perceive_sweep import run_sweep
+
+        return run_sweep(args)
     if args.scenes > 1:
         return _run_many(args)
 
     scene = scene_from_args(args)
     spec = scene.spec
     res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(scene.seed), all_cameras=bool(args.images),
-                   params=_params(args))
+                   params=_params(args), pipeline=args.pipeline, sensor=_sensor(args))
     out: dict = {
         "detections": [d.to_json() for d in res.detections],
         "timing_s": {"render": round(res.render_time_s, 4), "process": round(res.process_time_s, 4)},
@@ -91,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(out))
         return 0
+    if res.plate_noise_m is not None:
+        print(f"depth noise measured on the plate: {1e3 * res.plate_noise_m:.2f} mm")
     print(f"scene seed {scene.seed}, variant {scene.variant}: {len(res.detections)} cans detected "
           f"(render {1e3 * res.render_time_s:.0f} ms, process {1e3 * res.process_time_s:.1f} ms)")
     for d in res.detections:
@@ -119,6 +146,7 @@ def _run_many(args: argparse.Namespace) -> int:
     from scenes.errors import SuiteError
 
     spec = spec_from_args(args)
+    sensor = _sensor(args)
     matches, records, proc_s, render_s, skipped = [], [], [], [], []
     seed = args.seed - 1
     while len(matches) < args.scenes:
@@ -132,7 +160,8 @@ def _run_many(args: argparse.Namespace) -> int:
             log.warning("seed %d skipped: %s", seed, exc)
             skipped.append(seed)
             continue
-        res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(seed), params=_params(args))
+        res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(seed), params=_params(args),
+                       pipeline=args.pipeline, sensor=sensor)
         m = match_scene(res.detections, scene)
         matches.append(m)
         records.append(_scene_record(seed, m))
@@ -147,11 +176,14 @@ def _run_many(args: argparse.Namespace) -> int:
     timing = {"render_median": round(float(np.median(render_s)), 4), "process_median": round(float(np.median(proc_s)), 4)}
     if args.json:
         print(json.dumps({"variant": spec.variant, "seeds": [args.seed, seed],
-                          "depth_noise_m": args.depth_noise_m, "segmentation": args.segmentation, "skipped_seeds": skipped, "evaluation": acc.to_json(), "timing_s": timing,
+                          "depth_noise_m": args.depth_noise_m, "segmentation": args.segmentation,
+                          **({"pipeline": args.pipeline} if args.pipeline != "paper" else {}),
+                          **({"sensor": args.sensor} if args.sensor else {}), "skipped_seeds": skipped, "evaluation": acc.to_json(), "timing_s": timing,
                           "scenes": records}))
         return 0
     print(f"variant {spec.variant}, seeds {args.seed}..{seed}, "
-          f"depth noise {args.depth_noise_m} m, {args.segmentation} segmentation" + (f", skipped seeds (no scene) {skipped}" if skipped else ""))
+          f"{'sensor ' + args.sensor if args.sensor else f'depth noise {args.depth_noise_m} m'}, "
+          f"{args.segmentation} segmentation, {args.pipeline} pipeline" + (f", skipped seeds (no scene) {skipped}" if skipped else ""))
     for line in acc.lines():
         print("  " + line)
     for rec in records:
