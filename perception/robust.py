@@ -13,7 +13,8 @@ refuses what the fits do not support.
 4. Re-fits, each with a confidence:
    - upright: a circle of the can's radius fitted by RANSAC to the outline of its flat top; the
      centre is the can's; the confidence is the fraction of the rim's 5-degree sectors holding an inlier;
-   - lying: the can's upper half (points higher than r above the plate, within r of the axis):
+   - lying: the can's upper half (points higher than r above the plate, within r of the axis, on
+     its cylinder's surface and in one unbroken run along the axis, so a neighbour off its end is out):
      the middle of its extent along the axis is the can's centre (its ends are the can's ends;
      the strip of vertical normals is not evenly filled), its principal axis the can's axis when
      the noise exceeds `strip_yaw_noise_m` (the strip's line is the better one on clean depth);
@@ -44,6 +45,12 @@ log = logging.getLogger(__name__)
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
 #: angular sectors of an upright can's rim in its confidence (5 degrees each)
 RIM_SECTORS = 72
+#: a lying can's upper-half points lie at least this close to its cylinder (a rendered can's facets)
+LYING_SURFACE_TOL_M = 0.002
+#: bins along a lying can's axis (a neighbour off its end is left out past one empty bin), and the
+#: fraction of the middle's typical count that fills a bin
+LYING_RUN_BIN_M = 0.002
+LYING_RUN_MIN_FRACTION = 0.2
 
 
 @dataclasses.dataclass(frozen=True)
@@ -165,9 +172,35 @@ def _top_outline_xy(fa: FrameAnalysis, det: CanDetection, spec: SceneSpec, tol_m
     return win.p_W[outline][:, :2]
 
 
+def _contiguous_run(along_m: np.ndarray, *, half_span_m: float, bin_m: float, min_fraction: float) -> np.ndarray:
+    """The points (a mask) of the run of filled bins along the axis that holds the middle (0): a bin is
+    filled with at least `min_fraction` of the median count of the bins in the middle half of the
+    can's length. A neighbour standing off a lying can's end is past an empty bin and is left out."""
+    edges = np.arange(-half_span_m, half_span_m + bin_m, bin_m)
+    counts, _ = np.histogram(along_m, edges)
+    mid = np.abs(0.5 * (edges[:-1] + edges[1:])) < half_span_m / 2
+    filled = counts >= max(1.0, min_fraction * float(np.median(counts[mid])))
+    i0 = int(np.clip(np.searchsorted(edges, 0.0) - 1, 0, len(counts) - 1))
+    if not filled[i0]:
+        return np.zeros(len(along_m), bool)
+    lo = hi = i0
+    while lo > 0 and filled[lo - 1]:
+        lo -= 1
+    while hi < len(counts) - 1 and filled[hi + 1]:
+        hi += 1
+    return (along_m >= edges[lo]) & (along_m < edges[hi + 1])
+
+
 def _lying_fit(fa: FrameAnalysis, det: CanDetection, spec: SceneSpec) -> tuple[np.ndarray, float, float]:
-    """A lying can's centre (x, y), axis yaw and the length (metres) its upper half spans (points
-    higher than r above the plate, within r of the detection's axis, about its centre)."""
+    """A lying can's centre (x, y), axis yaw and the length (metres) its upper half spans.
+
+    The upper half's points: higher than r above the plate, within r of the detection's axis, on
+    the cylinder's surface (height r + sqrt(r^2 - d^2) at a distance d from the axis, within three
+    robust sigmas of its residual on the can's middle half, at least `LYING_SURFACE_TOL_M`), and
+    in the run of the axis that holds the detection's centre (`_contiguous_run`). Without the last
+    two, the side of a can or box standing beyond the can's end, seen obliquely in the same height
+    band, lengthened the span and moved the centre by up to 7 mm along the axis (docs/perception.md).
+    """
     yaw = det.axis_yaw_rad
     image = fa.image
     r, h = spec.can.radius_m, spec.can.height_m
@@ -188,10 +221,22 @@ def _lying_fit(fa: FrameAnalysis, det: CanDetection, spec: SceneSpec) -> tuple[n
         d = p_W[:, :2] - c0
         along, across = d @ a, d @ np.array([-a[1], a[0]])
         sel = (z > r + 0.004) & (z < 2 * r + 0.01) & (np.abs(across) < r) & (np.abs(along) < h / 2 + 0.015)
+        resid = z - (r + np.sqrt(np.clip(r * r - across * across, 0.0, None)))
+    core = sel & (np.abs(along) < h / 4)
+    if core.sum() < 20:
+        return c0, yaw, 0.0
+    rc = resid[core]
+    tol = max(LYING_SURFACE_TOL_M, 3.0 * 1.4826 * float(np.median(np.abs(rc - np.median(rc)))))
+    sel &= np.abs(resid) < tol
     if sel.sum() < 20:
         return c0, yaw, 0.0
-    lo, hi = np.percentile(along[sel], [1, 99])
-    return c0 + 0.5 * (lo + hi) * a, axis_yaw_tls(p_W[sel, :2]), float(hi - lo)
+    idx = np.flatnonzero(sel)
+    run = _contiguous_run(along[idx], half_span_m=h / 2 + 0.015, bin_m=LYING_RUN_BIN_M, min_fraction=LYING_RUN_MIN_FRACTION)
+    idx = idx[run]
+    if idx.size < 20:
+        return c0, yaw, 0.0
+    lo, hi = np.percentile(along[idx], [1, 99])
+    return c0 + 0.5 * (lo + hi) * a, axis_yaw_tls(p_W[idx, :2]), float(hi - lo)
 
 
 def detect_cans_robust(
