@@ -9,8 +9,8 @@ online for replanning, never stored, so every existing scene key and dataset sta
 The bin path (`BinPath`): from the spec's bin centre, the bin walks to target points drawn
 uniformly in `region_m` (a box its centre stays in), one after the other along straight lines,
 each with a trapezoidal speed profile (cruise `speed_m_s`, accelerate and brake at
-`accel_m_s2`, at rest at every target). It is sampled once on a 10 ms grid for cheap lookup. The
-bin never turns.
+`accel_m_s2`), pausing `dwell_s` at every target. It is sampled once on a 10 ms grid for cheap
+lookup. The bin never turns.
 """
 
 from __future__ import annotations
@@ -47,6 +47,7 @@ class MovingBinScenario:
         accel_m_s2: its acceleration and braking limit (a person walking with a load: 1-2 m/s^2;
             the bin stops at each target, so at high speeds it cruises only part of the time:
             the records give its mean speed too).
+        dwell_s: how long the person pauses at each target point before walking on.
         region_m: the box its centre stays in, ((x_lo, y_lo), (x_hi, y_hi)) in metres; None for
             the spec's bin centre offset by DEFAULT_REGION_OFFSETS_M. It must hold the spec's bin
             centre.
@@ -72,6 +73,7 @@ class MovingBinScenario:
 
     speed_m_s: NonNeg = 0.1
     accel_m_s2: Pos = 2.0
+    dwell_s: NonNeg = 0.5
     region_m: tuple[Vec2, Vec2] | None = None
     seed: NonNegInt = 0
     person_radius_m: Pos = 0.2
@@ -80,7 +82,7 @@ class MovingBinScenario:
     estimate_latency_s: NonNeg = 0.1
     estimate_rate_hz: Pos = 10.0
     estimate_noise_m: NonNeg = 0.003
-    velocity_window: PosInt = 10
+    velocity_window: PosInt = 5
     drift_tolerance_m: Pos = 0.04
     replan_deadline_s: Pos = 0.3
     max_wait_s: Pos = 3.0
@@ -282,5 +284,5 @@ def bin_path(scenario: MovingBinScenario, spec: SceneSpec, *, horizon_s: float =
         vel[m] = sd[:, None] * u
         xy[t >= t0 + T] = target
         vel[t >= t0 + T] = 0.0
-        t0, p0 = t0 + T, target
+        t0, p0 = t0 + T + scenario.dwell_s, target
     return BinPath(t, xy, vel)

@@ -56,6 +56,9 @@ NOT_APPLICABLE = {
 TRANSIT_GUESS_S = 1.5
 #: Kept replan events per record.
 MAX_EVENTS = 400
+#: Simulated time an episode may take per can before it stops safely (a guard: every wait of the
+#: loop is bounded by max_wait_s, so only a bug would reach it).
+EPISODE_CAP_PER_CAN_S = 60.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -254,6 +257,7 @@ class _Episode:
         self.events: list[ReplanEvent] = []
         self.cans: list[CanEpisode] = []
         self.mode = "idle"
+        self.can_id = -1
         self.done = False
         self.plan_wall = 0.0
         self.last_transit_s = TRANSIT_GUESS_S
@@ -323,8 +327,8 @@ class _Episode:
     # --- events --------------------------------------------------------------------------------
 
     def on_stream_end(self, t: float) -> None:
-        handler = {"idle": self._next_can, "await_transit": self._retry_transit, "transit": self._arrived,
-                   "released": self._plan_return, "returning": self._next_can}[self.mode]
+        handler = {"idle": self._next_can, "lift": self.on_lift_start, "await_transit": self._retry_transit,
+                   "transit": self._arrived, "released": self._plan_return, "returning": self._next_can}[self.mode]
         handler(t)
 
     def _next_can(self, t: float) -> None:
@@ -376,7 +380,6 @@ class _Episode:
         self.arrival_t = motion_start + res.trajectory.duration_s
         self.last_transit_s = res.trajectory.duration_s
         self.mode = "transit"
-        self.arrived_t = None
 
     def _retry_transit(self, t: float) -> None:
         if t - self.lift_end_t > self.s.max_wait_s:
@@ -438,7 +441,7 @@ class _Episode:
             st.append_hold("wait", self.can_id, self.busy_until - t, width_from_m=0.0, carrying=True)
             return
         if self.arrived_t is None:
-            self.arrived_t = t
+            self.arrived_t = t  # the wait runs from the first arrival, whatever is replanned after it
         if self._over_opening(t):
             truth = self.path.at(t)[0]
             self.cans.append(CanEpisode(self.can_id, True, t - self.grasp_t,
@@ -498,6 +501,10 @@ class _Episode:
         last_k = self.estimator.latest_index(0.0)
         lifted: set[int] = set()
         while True:
+            if not self.done and t > EPISODE_CAP_PER_CAN_S * max(1, len(job.cans)):
+                carrying = st.at(t).carrying
+                st.cut(t, can_id=self.can_id, width_m=0.0 if carrying else self.open_w, carrying=carrying)
+                self._stop(f"the episode ran past its cap of {EPISODE_CAP_PER_CAN_S:g} s a can", carrying=carrying)
             if not self.done and t >= st.duration_s - 1e-9:
                 self.on_stream_end(t)
             if self.done and t >= st.duration_s - 1e-9:
