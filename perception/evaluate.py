@@ -209,3 +209,66 @@ def aggregate(matches: list[SceneMatch]) -> Accuracy:
         distractors=sum(m.n_distractors for m in matches),
         distractor_grasps=sum(len(m.distractor_grasps) for m in matches),
     )
+
+
+@dataclasses.dataclass(frozen=True)
+class LookalikeMatch:
+    """The grasps on one scene's look-alikes (`scenes.lookalikes`).
+
+    Attributes:
+        hourglasses: hourglasses in the scene; hourglass_grasps: detections whose grasp lies on one
+            (within half a can radius of its widest section's footprint).
+        dented: dented cans in the scene, and per dented can found (a detection within a can
+            radius of its centre): its xy error (metres), lying/upright right, and (lying) the
+            axis error in radians.
+    """
+
+    hourglasses: int
+    hourglass_grasps: int
+    dented: int
+    dented_xy_error_m: tuple[float, ...]
+    dented_kind_correct: tuple[bool, ...]
+    dented_yaw_error_rad: tuple[float, ...]
+
+
+def match_lookalikes(detections, scene: Scene) -> LookalikeMatch:
+    """How the detections fall on the scene's hourglasses and dented cans."""
+    from scenes import lookalikes as la
+
+    r, h = scene.spec.can.radius_m, scene.spec.can.height_m
+    hours = la.groups(scene.spec.extra, la.HOURGLASS_PREFIX)
+    on_hour = sum(1 for det in detections
+                  if any(on_distractor(det.grasp.X_WG[:2, 3], max(parts, key=lambda o: o.size_m[0]), margin_m=r / 2)
+                         for parts in hours.values()))
+    dented = la.groups(scene.spec.extra, la.DENTED_PREFIX)
+    errs, kinds, yaws = [], [], []
+    for parts in dented.values():
+        centre, axis = la.dented_pose(parts, height_m=h)
+        lying = abs(axis[2]) < 0.5
+        if not detections:
+            continue
+        d = [float(np.linalg.norm(np.asarray(x.p_WC_m[:2]) - centre[:2])) for x in detections]
+        j = int(np.argmin(d))
+        if d[j] > r:
+            continue
+        det = detections[j]
+        errs.append(d[j])
+        kinds.append(det.lying == lying)
+        if lying and det.lying:
+            yaws.append(axis_error_rad(det.axis_yaw_rad, math.atan2(axis[1], axis[0])))
+    return LookalikeMatch(len(hours), on_hour, len(dented), tuple(errs), tuple(kinds), tuple(yaws))
+
+
+def lookalike_lines(matches: list[LookalikeMatch]) -> list[str]:
+    """Summary lines over scenes (none when they hold no look-alikes)."""
+    n_h = sum(m.hourglasses for m in matches)
+    n_d = sum(m.dented for m in matches)
+    if not (n_h or n_d):
+        return []
+    errs = [e for m in matches for e in m.dented_xy_error_m]
+    yaws = [y for m in matches for y in m.dented_yaw_error_rad]
+    kinds = [k for m in matches for k in m.dented_kind_correct]
+    return [f"grasps on hourglasses: {sum(m.hourglass_grasps for m in matches)} ({n_h} hourglasses in the scenes)",
+            f"dented cans grasped: {len(errs)} of {n_d}, lying/upright right {sum(kinds)}, xy error median "
+            f"{_q(errs, 50, 1e3):.2f} / max {1e3 * max(errs, default=float('nan')):.2f} mm, lying axis error max "
+            f"{math.degrees(max(yaws, default=float('nan'))):.2f} deg ({len(yaws)} lying)"]

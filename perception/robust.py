@@ -20,6 +20,8 @@ refuses what the fits do not support.
      the noise exceeds `strip_yaw_noise_m` (the strip's line is the better one on clean depth);
      the confidence is the extent's length over the can's.
    A detection below `min_confidence` is refused (logged), never grasped.
+5. Given the side cameras' frames, an upright detection whose side they see narrower than a
+   can's (`perception.side_view`: the seed paper's hourglass) is refused as a look-alike.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from perception.crop import roi_mask
 from perception.geometry import axis_yaw_tls, back_project_camera, camera_to_world, project
 from perception.grasps import CanDetection, FrameAnalysis, PerceptionParams, detect_cans
 from perception.plane import ransac_plane
+from perception.side_view import looks_alike, side_views, world_points
 from scenes.grasp_rule import make_grasp
 from scenes.render import CameraImage
 from scenes.spec import SceneSpec
@@ -66,6 +69,8 @@ class RobustParams:
         strip_yaw_noise_m: above this noise a lying can's axis comes from its upper half.
         min_upright_confidence: an upright can's fitted rim must cover this fraction of its circle.
         min_lying_confidence: a lying can's upper half must span this fraction of its length.
+        side_check: refuse an upright detection whose side the side cameras see narrower than a
+            can's (only when their frames are given).
     """
 
     base: PerceptionParams = PerceptionParams(segmentation="geometric")
@@ -77,6 +82,7 @@ class RobustParams:
     strip_yaw_noise_m: float = 0.002
     min_upright_confidence: float = 0.5
     min_lying_confidence: float = 0.8
+    side_check: bool = True
 
 
 def plate_noise_m(image: CameraImage, spec: SceneSpec, *, rng: np.random.Generator | None = None) -> float:
@@ -240,9 +246,12 @@ def _lying_fit(fa: FrameAnalysis, det: CanDetection, spec: SceneSpec) -> tuple[n
 
 
 def detect_cans_robust(
-    image: CameraImage, spec: SceneSpec, params: RobustParams = RobustParams()
+    image: CameraImage, spec: SceneSpec, params: RobustParams = RobustParams(),
+    side_images: dict[str, CameraImage] | None = None,
 ) -> tuple[list[CanDetection], FrameAnalysis, float]:
     """Detect the cans in a top-camera frame with the robust pipeline (see the module docstring).
+
+    `side_images` (camera name -> frame, e.g. `front` and `back`) enable the side check.
 
     Returns:
         The detections kept (each with its confidence), the smoothed frame's analysis, and the
@@ -259,6 +268,7 @@ def detect_cans_robust(
                     "refused", 1e3 * measured, 1e3 * params.max_noise_m, len(dets))
         return [], fa, measured
     r, h = spec.can.radius_m, spec.can.height_m
+    side_points = world_points(side_images) if side_images and params.side_check else {}
     out: list[CanDetection] = []
     for det in dets:
         if det.lying:
@@ -277,6 +287,13 @@ def detect_cans_robust(
             log.warning("%s can at (%.3f, %.3f): confidence %.2f below %.2f; refused, no grasp",
                         "lying" if det.lying else "upright", xy[0], xy[1], conf, floor)
             continue
+        if side_points and not det.lying:
+            views = side_views(xy, side_points, spec)
+            if looks_alike(views, radius_m=r, tolerance_m=params.base.shape_tolerance_m):
+                log.warning("upright can at (%.3f, %.3f): its side is %s from the axis (r = %.1f mm): a look-alike, "
+                            "refused, no grasp", xy[0], xy[1], ", ".join(f"{1e3 * v.median_radius_m:.1f} mm ({v.camera})"
+                                                                      for v in views if v.points), 1e3 * r)
+                continue
         grasp = make_grasp(can_id=len(out), p_xy_m=xy, top_z_m=det.top_z_m, lying=det.lying, axis_yaw_rad=yaw,
                            top_offset_m=spec.grasp.top_offset_m, pregrasp_height_m=spec.grasp.pregrasp_height_m)
         out.append(dataclasses.replace(det, id=len(out), p_WC_m=(float(xy[0]), float(xy[1]), det.p_WC_m[2]),

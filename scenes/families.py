@@ -13,6 +13,9 @@ for feasibility (waypoints reachable by collision-aware IK; redrawn otherwise) a
   window in it with the carried can (a narrow passage: no way over or around).
 - `clutter`: a dense plate (8-12 cans, gaps 0-1 cm) with distractors (bottles, boxes, cups) that
   are obstacles and never recyclable.
+- `lookalike`: clutter's draw, then the seed paper's look-alikes (`scenes.lookalikes`): red
+  hourglasses with a can's radius and height, and dented cans, all obstacles (never recyclable
+  here: what is measured is whether perception would grasp them).
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from scenes.errors import SuiteError
-from scenes.family_ranges import ClutterRanges, Range, ShelfRanges, StationRanges, WindowRanges
+from scenes.family_ranges import ClutterRanges, LookalikeRanges, Range, ShelfRanges, StationRanges, WindowRanges
 from scenes.spec import CameraPose, Obstacle, SceneSpec, pose_tuple
 
 #: Height of the waypoint above the plate over the plate's top face, and above the bin's rim.
@@ -252,7 +255,48 @@ def _draw_clutter(ranges: ClutterRanges, spec: SceneSpec, rng: np.random.Generat
     return _with_layout(spec, plate_xy=spec.plate.center_m[:2], bin_xy=spec.bin.center_xy_m,
                         middle_m=wp.middle_m, extra=extra, cans=cans)
 
-DRAWERS = {StationRanges: _draw_station, ShelfRanges: _draw_shelf, WindowRanges: _draw_window, ClutterRanges: _draw_clutter}
+def _draw_lookalike(ranges: LookalikeRanges, spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:
+    """Clutter's draw, then hourglasses and dented cans (upright or lying, with the cans' lying
+    probability) placed clear of the distractors and of each other, 1 cm apart at least."""
+    from scenes import lookalikes as la
+
+    drawn = _draw_clutter(ranges, spec, rng)
+    r, h, top = spec.can.radius_m, spec.can.height_m, spec.plate_top_z_m
+    cx, cy, _ = spec.plate.center_m
+    sx, sy = spec.plate.size_m[:2]
+    placed = [(o.pose()[:2, 3], o.size_m[0] if o.shape == "cylinder" else 0.5 * math.hypot(o.size_m[0], o.size_m[1]))
+              for o in drawn.extra]
+    extra = list(drawn.extra)
+    n_hour = int(rng.integers(ranges.hourglasses[0], ranges.hourglasses[1] + 1))
+    n_dent = int(rng.integers(ranges.dented[0], ranges.dented[1] + 1))
+    for i, kind in enumerate(["hourglass"] * n_hour + ["dented"] * n_dent):
+        lying = kind == "dented" and rng.random() < spec.cans.lying_probability
+        radius = h / 2 if lying else r
+        for _ in range(200):
+            m = radius + spec.cans.edge_margin_m
+            p = np.array([rng.uniform(cx - sx / 2 + m, cx + sx / 2 - m), rng.uniform(cy - sy / 2 + m, cy + sy / 2 - m)])
+            if all(np.linalg.norm(p - q) >= radius + rq + 0.01 for q, rq in placed):
+                break
+        else:
+            continue
+        placed.append((p, radius))
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        band = float(rng.uniform(-0.15, 0.15)) * h
+        if kind == "hourglass":
+            extra += la.hourglass(i, p_xy_m=p, plate_top_z_m=top, radius_m=r, height_m=h, color_rgba=spec.can.color_rgba)
+        elif lying:  # the dent faces up, within 60 degrees (what the top camera sees of it)
+            X = la.lying_frame(p_xy_m=p, yaw_rad=yaw, plate_top_z_m=top, radius_m=r, roll_rad=0.0)
+            extra += la.dented_can(i, X_WC=X, dent_dir_rad=math.pi + float(rng.uniform(-1.0, 1.0)) * math.pi / 3,
+                                   band_center_m=band, radius_m=r, height_m=h, color_rgba=spec.can.color_rgba)
+        else:
+            X = _rz(0.0, (p[0], p[1], top + h / 2))
+            extra += la.dented_can(i, X_WC=X, dent_dir_rad=yaw, band_center_m=band, radius_m=r, height_m=h,
+                                   color_rgba=spec.can.color_rgba)
+    return dataclasses.replace(drawn, extra=tuple(extra))
+
+
+DRAWERS = {StationRanges: _draw_station, ShelfRanges: _draw_shelf, WindowRanges: _draw_window, ClutterRanges: _draw_clutter,
+           LookalikeRanges: _draw_lookalike}
 
 
 def draw_station(spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:

@@ -104,7 +104,18 @@ class ClutterRanges(_Ranges):
     generator: ClassVar[str] = "clutter"
 
 
-GENERATORS: dict[str, type[_Ranges]] = {c.generator: c for c in (StationRanges, ShelfRanges, WindowRanges, ClutterRanges)}
+@dataclasses.dataclass(frozen=True)
+class LookalikeRanges(ClutterRanges):
+    """Clutter's plate with the seed paper's look-alikes (`scenes.lookalikes`): red hourglasses that
+    match a can from above, and dented cans (upright or lying, as the cans are)."""
+
+    hourglasses: count_range_within(0, 6) = (1, 2)
+    dented: count_range_within(0, 6) = (1, 2)
+    generator: ClassVar[str] = "lookalike"
+
+
+GENERATORS: dict[str, type[_Ranges]] = {c.generator: c for c in (StationRanges, ShelfRanges, WindowRanges, ClutterRanges,
+                                                                LookalikeRanges)}
 
 
 def parse_family(raw: Any, *, name: str, where: str = "scene spec ") -> _Ranges:

@@ -140,14 +140,14 @@ def _run_many(args: argparse.Namespace) -> int:
     A detection matches a can when their centres are within the can radius in xy; a grasp within
     half a can radius of a distractor's footprint is a grasp on that distractor.
     """
-    from perception.evaluate import aggregate, match_scene
+    from perception.evaluate import aggregate, lookalike_lines, match_lookalikes, match_scene
     from perception.pipeline import perceive
     from scenes.generate import generate_scene
     from scenes.errors import SuiteError
 
     spec = spec_from_args(args)
     sensor = _sensor(args)
-    matches, records, proc_s, render_s, skipped = [], [], [], [], []
+    matches, records, proc_s, render_s, skipped, looks = [], [], [], [], [], []
     seed = args.seed - 1
     while len(matches) < args.scenes:
         seed += 1
@@ -164,7 +164,9 @@ def _run_many(args: argparse.Namespace) -> int:
                        pipeline=args.pipeline, sensor=sensor)
         m = match_scene(res.detections, scene)
         matches.append(m)
-        records.append(_scene_record(seed, m))
+        looks.append(match_lookalikes(res.detections, scene))
+        records.append({**_scene_record(seed, m), "hourglass_grasps": looks[-1].hourglass_grasps,
+                        "dented_grasped": len(looks[-1].dented_xy_error_m)})
         proc_s.append(res.process_time_s)
         render_s.append(res.render_time_s)
         missed = m.n_truth - len(m.pairs)
@@ -178,13 +180,14 @@ def _run_many(args: argparse.Namespace) -> int:
         print(json.dumps({"variant": spec.variant, "seeds": [args.seed, seed],
                           "depth_noise_m": args.depth_noise_m, "segmentation": args.segmentation,
                           **({"pipeline": args.pipeline} if args.pipeline != "paper" else {}),
-                          **({"sensor": args.sensor} if args.sensor else {}), "skipped_seeds": skipped, "evaluation": acc.to_json(), "timing_s": timing,
+                          **({"sensor": args.sensor} if args.sensor else {}), "skipped_seeds": skipped, "evaluation": acc.to_json(),
+                          **({"lookalikes": lookalike_lines(looks)} if lookalike_lines(looks) else {}), "timing_s": timing,
                           "scenes": records}))
         return 0
     print(f"variant {spec.variant}, seeds {args.seed}..{seed}, "
           f"{'sensor ' + args.sensor if args.sensor else f'depth noise {args.depth_noise_m} m'}, "
           f"{args.segmentation} segmentation, {args.pipeline} pipeline" + (f", skipped seeds (no scene) {skipped}" if skipped else ""))
-    for line in acc.lines():
+    for line in acc.lines() + lookalike_lines(looks):
         print("  " + line)
     for rec in records:
         if rec["distractor_grasps"]:

@@ -13,22 +13,22 @@ from scenes.generate import generate_scene, picking_order, station_unreachable
 from scenes.spec import load_spec, loads_spec, spec_from_dict
 from scenes.spec import DEFAULT_SPEC_PATH
 
-FAMILIES = ("station", "shelf", "window", "clutter")
+FAMILIES = ("station", "shelf", "window", "clutter", "lookalike")
 
 
 @functools.lru_cache(maxsize=None)
 def family_scene(family: str, seed: int):
     spec = load_spec(variant=family)
-    if family == "clutter":
+    if family in ("clutter", "lookalike"):
         spec = spec.with_can_count(6)  # dense, but fewer cans keep the test fast
-    return generate_scene(spec.with_can_count(spec.cans.count if family == "clutter" else 3), seed=seed)
+    return generate_scene(spec.with_can_count(spec.cans.count if family in ("clutter", "lookalike") else 3), seed=seed)
 
 
 @pytest.mark.parametrize("family", FAMILIES)
 def test_same_seed_same_station(family):
     a = family_scene(family, 4242)
     spec = load_spec(variant=family)
-    b = generate_scene(spec.with_can_count(6 if family == "clutter" else 3), seed=4242)
+    b = generate_scene(spec.with_can_count(6 if family in ("clutter", "lookalike") else 3), seed=4242)
     assert a.key() == b.key() and a.to_json() == b.to_json()
 
 
@@ -89,6 +89,25 @@ def test_clutter_has_distractors_and_dense_cans():
     names = [o.name for o in scene.spec.extra]
     assert sum(n.startswith("distractor_") for n in names) >= 2
     assert scene.spec.cans.min_gap_m <= 0.01 and len(scene.cans) == 6
+
+
+def test_lookalike_adds_hourglasses_and_dented_cans_and_clutter_keeps_its_scenes():
+    from scenes.lookalikes import DENTED_PREFIX, HOURGLASS_PREFIX, HOURGLASS_SECTIONS, groups
+
+    scene = family_scene("lookalike", 4245)
+    spec = scene.spec
+    r, h, top = spec.can.radius_m, spec.can.height_m, spec.plate_top_z_m
+    hours, dents = groups(spec.extra, HOURGLASS_PREFIX), groups(spec.extra, DENTED_PREFIX)
+    assert 1 <= len(hours) <= 2 and 1 <= len(dents) <= 2
+    for parts in hours.values():
+        assert len(parts) == HOURGLASS_SECTIONS and all(o.color_rgba == spec.can.color_rgba for o in parts)
+        zs = [(o.pose()[2, 3] - o.size_m[1] / 2, o.pose()[2, 3] + o.size_m[1] / 2) for o in parts]
+        assert min(z for z, _ in zs) == pytest.approx(top) and max(z for _, z in zs) == pytest.approx(top + h)
+        radii = [o.size_m[0] for o in parts]
+        assert radii[0] == radii[-1] == r and min(radii) < 0.6 * r  # a can from above, a waist from the side
+    for parts in dents.values():
+        assert sum(o.size_m[1] for o in parts) == pytest.approx(h) and max(o.size_m[0] for o in parts) == r
+    assert generate_scene(load_spec(variant="clutter"), seed=9318).key() == "36d944ae1a3bdadb"  # as before the lookalike family
 
 
 def test_scene_json_lists_obstacles_and_waypoints():

@@ -1,0 +1,102 @@
+"""The seed paper's look-alikes, built from the obstacle primitives every engine already loads
+(Drake rendering, the Drake collision scene and the python-fcl world see them as they see any
+`extra` obstacle): a red hourglass that matches a can from above, and a dented can.
+
+- Hourglass (`hourglass_N_k`, k = 0 at the bottom): `HOURGLASS_SECTIONS` coaxial cylinders
+  stacked to the can's height; the bottom and top sections have the can's radius (a can's flat top
+  and rim from above), the ones between narrow linearly to a waist of `HOURGLASS_WAIST_FRACTION`
+  of it at mid-height. The top camera sees a can's disc; only a side view shows the waist.
+- Dented can (`dented_N_bottom`, `_band`, `_top`): a can of the spec's size and colour whose side
+  is pushed in over a band of its length. Primitives cannot be cut, so the dent is approximated:
+  over the band, the body is a cylinder of radius r - d/2 whose axis is moved d/2 away from the
+  dent, which keeps the far side at r and pushes the near side in by `DENT_DEPTH_M` (d), tapering
+  to nothing at right angles to it. A real dent is local (a crease a few centimetres wide); this
+  one runs around half of the can, and has sharp edges at the band's ends.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from scenes.spec import Obstacle, pose_tuple
+
+HOURGLASS_PREFIX = "hourglass_"
+DENTED_PREFIX = "dented_"
+#: stacked cylinders of an hourglass, and its waist's radius over the can's
+HOURGLASS_SECTIONS = 9
+HOURGLASS_WAIST_FRACTION = 0.55
+#: how far a dent pushes the side in (metres) and the band's length over the can's
+DENT_DEPTH_M = 0.008
+DENT_BAND_FRACTION = 0.35
+
+
+def _X(R: np.ndarray, p) -> np.ndarray:
+    X = np.eye(4)
+    X[:3, :3] = R
+    X[:3, 3] = p
+    return X
+
+
+def _rz(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def hourglass(index: int, *, p_xy_m, plate_top_z_m: float, radius_m: float, height_m: float, color_rgba) -> list[Obstacle]:
+    """The parts of an upright hourglass standing at `p_xy_m` on the plate (see the module docstring)."""
+    n = HOURGLASS_SECTIONS
+    dz = height_m / n
+    waist = HOURGLASS_WAIST_FRACTION * radius_m
+    half = (n - 1) / 2
+    out = []
+    for k in range(n):
+        d = abs(k - half) / half  # 1 at the ends, 0 at the waist
+        r = radius_m if k in (0, n - 1) else waist + (radius_m - waist) * d
+        X = _X(np.eye(3), (p_xy_m[0], p_xy_m[1], plate_top_z_m + (k + 0.5) * dz))
+        out.append(Obstacle(f"{HOURGLASS_PREFIX}{index}_{k}", "cylinder", (float(r), float(dz)), pose_tuple(X),
+                            tuple(color_rgba)))
+    return out
+
+
+def dented_can(index: int, *, X_WC: np.ndarray, dent_dir_rad: float, band_center_m: float, radius_m: float,
+               height_m: float, color_rgba) -> list[Obstacle]:
+    """The parts of a dented can at pose `X_WC` (the can's frame: its axis is z, its centre the
+    origin). The dent faces `dent_dir_rad` about the axis from the frame's x; its band is centred
+    `band_center_m` along the axis."""
+    h, r = height_m, radius_m
+    b = DENT_BAND_FRACTION * h
+    z1, z2 = band_center_m - b / 2, band_center_m + b / 2
+    away = -np.array([math.cos(dent_dir_rad), math.sin(dent_dir_rad), 0.0])
+    parts = {"bottom": (r, z1 + h / 2, np.array([0.0, 0.0, (-h / 2 + z1) / 2])),
+             "band": (r - DENT_DEPTH_M / 2, b, np.array([0.0, 0.0, band_center_m]) + DENT_DEPTH_M / 2 * away),
+             "top": (r, h / 2 - z2, np.array([0.0, 0.0, (z2 + h / 2) / 2]))}
+    return [Obstacle(f"{DENTED_PREFIX}{index}_{name}", "cylinder", (float(rad), float(length)),
+                     pose_tuple(X_WC @ _X(np.eye(3), p_C)), tuple(color_rgba)) for name, (rad, length, p_C) in parts.items()]
+
+
+def lying_frame(*, p_xy_m, yaw_rad: float, plate_top_z_m: float, radius_m: float, roll_rad: float) -> np.ndarray:
+    """X_WC of a can lying on the plate, its axis along yaw, turned by roll about its axis (at roll
+    0 the frame's x points down)."""
+    Ry = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # z -> world x, x -> -z
+    return _X(_rz(yaw_rad) @ Ry @ _rz(roll_rad), (p_xy_m[0], p_xy_m[1], plate_top_z_m + radius_m))
+
+
+def groups(extra, prefix: str) -> dict[str, list[Obstacle]]:
+    """The look-alikes among obstacles, by object (`hourglass_0`, `dented_1`, ...)."""
+    out: dict[str, list[Obstacle]] = {}
+    for o in extra:
+        if o.name.startswith(prefix):
+            out.setdefault(o.name.rsplit("_", 1)[0], []).append(o)
+    return out
+
+
+def dented_pose(parts: list[Obstacle], *, height_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """A dented can's centre (3,) and axis (3,) in the world, from its bottom and top parts."""
+    by = {o.name.rsplit("_", 1)[1]: o for o in parts}
+    bot, top = by["bottom"], by["top"]
+    X0 = bot.pose()
+    axis = X0[:3, 2]
+    centre = X0[:3, 3] + axis * (height_m / 2 - bot.size_m[1] / 2)
+    return centre, axis
