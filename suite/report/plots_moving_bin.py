@@ -34,7 +34,8 @@ def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: P
         lo = np.array([100 * c.ci95[0] for c in mine])
         hi = np.array([100 * c.ci95[1] for c in mine])
         col = colors[p]
-        a_bin.errorbar(x + dx, rate, yerr=[rate - lo, hi - rate], color=col, marker="o", capsize=3, lw=1.8, label=p)
+        yerr = np.maximum(0.0, [rate - lo, hi - rate])  # Wilson: lo <= rate <= hi up to rounding
+        a_bin.errorbar(x + dx, rate, yerr=yerr, color=col, marker="o", capsize=3, lw=1.8, label=p)
         med = [np.median(c.latencies_s) if c.latencies_s else math.nan for c in mine]
         p95 = [np.quantile(c.latencies_s, 0.95) if c.latencies_s else math.nan for c in mine]
         a_lat.plot(x, med, color=col, marker="o", lw=1.8, label=f"{p} median")
@@ -50,15 +51,11 @@ def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: P
     a_bin.set_ylabel("cans in the bin (%)")
     a_bin.set_title("Cans delivered (95% Wilson intervals)", fontsize=10)
     a_bin.legend(fontsize=8, loc="lower left")
-    a_lat.set_yscale("log")
     if deadline is not None:
         a_lat.axhline(deadline, color="black", ls=":", lw=1.2)
         a_lat.text(0.98, deadline, f"deadline {deadline:g} s ", transform=a_lat.get_yaxis_transform(), fontsize=8,
-                   ha="right", va="top")
-    from matplotlib.ticker import FuncFormatter
-
-    a_lat.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
-    a_lat.yaxis.set_minor_formatter(FuncFormatter(lambda v, _: ""))
+                   ha="right", va="bottom")
+    a_lat.set_ylim(bottom=0)
     a_lat.set_ylabel("replan latency (s)")
     a_lat.set_title("Replan latency (solid: median, dashed: p95)", fontsize=10)
     a_miss.set_ylabel("per can attempted")
