@@ -20,7 +20,7 @@ def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: P
     if not cells:
         return None
     shown = list(dict.fromkeys(c.planner for c in cells))
-    colors = planner_colors(list(planners))
+    colors = planner_colors(list(dict.fromkeys([*planners, *shown])))
     speeds = sorted({c.speed_m_s for c in cells})
     deadline = next((r["scenario"]["replan_deadline_s"] for r in records if r.get("scenario")), None)
     fig, axes = plt.subplots(2, 2, figsize=(10.5, 7.2), sharex=True)

@@ -68,9 +68,11 @@ class SpeedCell:
 
 
 def speed_cells(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None) -> list[SpeedCell]:
-    """Per planner (in order) and speed (ascending), the episodes' totals."""
-    planners = list(planners) if planners is not None else list(dict.fromkeys(r["planner"] for r in records))
-    planners = [p for p in planners if any(r["planner"] == p for r in records)]
+    """Per planner (in the given order, then any other in the records) and speed (ascending), the
+    episodes' totals."""
+    present = list(dict.fromkeys(r["planner"] for r in records))
+    order = [p for p in (planners or ()) if p in present]
+    planners = order + [p for p in present if p not in order]  # the records' own planners too
     out = []
     for p in planners:
         mine = [r for r in records if r["planner"] == p]
