@@ -6,6 +6,10 @@ planner (`suite.report.summary_execution.execution_table`, as in a run's summary
 and among the scenes whose every problem was planned (the figure that judges execution), where
 the others ended, unintended contacts, tracking, slip, and the simulation's real-time factor
 (simulated / wall time of the simulation alone; one job per core).
+
+Perceived grasps go through the cameras' sensor model (`--sensor kinect-v1`, or today's Gaussian
+`--depth-noise-m`; default: the spec's, a perfect sensor) and each pipeline of `--pipeline`
+(`paper`, `robust` or both), one grasp source each; ground-truth grasps are the same for all.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ import argparse
 import json
 import time
 
-from suite.cli.args import nonneg_int, positive_int
+from suite.cli.args import nonneg_float, nonneg_int, positive_int
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -26,7 +30,38 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cans", type=positive_int, default=5, help="cans per scene (default 5)")
     p.add_argument("--jobs", type=positive_int, default=2, help="worker processes, one simulation each (default 2)")
     p.add_argument("--reperceive", action="store_true", help="closed loop: perceive and plan after each pick")
+    p.add_argument("--sensor", default=None, metavar="NAME",
+                   help="perceived grasps: the cameras' sensor model (scenes/sensor.py; kinect-v1: Khoshelham & "
+                        "Elberink's structured-light calibration; default: the spec's, a perfect sensor)")
+    p.add_argument("--depth-noise-m", type=nonneg_float, default=0.0,
+                   help="perceived grasps: Gaussian depth noise sigma in metres, 1%% of pixels dropped, instead of "
+                        "--sensor (default 0)")
+    p.add_argument("--pipeline", default="paper", metavar="LIST",
+                   help="perceived grasps: perception pipelines, each its own grasp source: paper, robust or "
+                        "paper,robust (default paper)")
+    p.add_argument("--segmentation", default="color", metavar="NAME",
+                   help="perceived grasps: color (the paper's HSV rule, default) or geometric")
     p.add_argument("--json", metavar="FILE", default=None, help="also write every execution record to FILE")
+
+
+def perception_setups(args: argparse.Namespace) -> list:
+    """The perceived grasp sources of the arguments, one `PerceptionSetup` per pipeline (raises
+    `SuiteError` naming a bad value and what is allowed)."""
+    from perception.pipeline import PIPELINES, PerceptionSetup
+    from scenes.errors import SuiteError
+
+    names = [n for n in str(args.pipeline).split(",") if n]
+    if not names:
+        raise SuiteError(f"--pipeline {args.pipeline!r} names no pipeline; allowed: {', '.join(PIPELINES)}")
+    if len(set(names)) < len(names):
+        raise SuiteError(f"--pipeline {args.pipeline!r} names a pipeline twice")
+    return [PerceptionSetup(pipeline=n, segmentation=args.segmentation, sensor=args.sensor or None,
+                            depth_noise_m=args.depth_noise_m) for n in names]
+
+
+def source_label(grasps: str, setup) -> str:
+    """A grasp source's name in the printed tables: `truth` or `perceived (robust, kinect-v1)`."""
+    return grasps if setup is None else f"{grasps} ({setup.label()})"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,17 +81,21 @@ def run(args: argparse.Namespace) -> int:
     for g in grasp_modes:
         if g not in ("truth", "perceived"):
             raise SuiteError(f"unknown grasp source {g!r}; allowed: truth, perceived")
+    setups = perception_setups(args)
+    # every grasp source: (grasps, perception setup or None for the truth)
+    sources = [(g, s) for g in grasp_modes for s in ((None,) if g == "truth" else setups)]
     configs = {p: config_dict(make_config(planner_class(p), None)) for p in planners}
     jobs = []
     for variant in variants:
         spec = load_spec(variant=variant).with_can_count(args.cans)
         for seed in range(args.first_seed, args.first_seed + args.scenes):
             scene = generate_scene(spec, seed=seed)
-            for grasps in grasp_modes:
+            for grasps, setup in sources:
                 for p in planners:
-                    jobs.append(ExecutionJob(p, configs[p], scene, grasps, 5.0, seed, reperceive=args.reperceive))
+                    jobs.append(ExecutionJob(p, configs[p], scene, grasps, 5.0, seed, reperceive=args.reperceive,
+                                             perception=setup))
     print(f"{len(jobs)} executions ({len(planners)} planners x {len(variants)} variants x {args.scenes} scenes "
-          f"x {len(grasp_modes)} grasp sources, {args.cans} cans each) on {args.jobs} worker(s)")
+          f"x {len(sources)} grasp sources, {args.cans} cans each) on {args.jobs} worker(s)")
     t0 = time.perf_counter()
     records = run_jobs(jobs, workers=args.jobs)
     print(f"done in {time.perf_counter() - t0:.0f} s wall")
@@ -66,8 +105,10 @@ def run(args: argparse.Namespace) -> int:
     from suite.report.summary_execution import execution_table
 
     for variant in variants:
-        for grasps in grasp_modes:
-            print(f"\n{variant}, {grasps} grasps{' (closed loop)' if args.reperceive else ''}:")
-            subset = [r for r in records if r["variant"] == variant and r["grasps"] == grasps]
+        for grasps, setup in sources:
+            print(f"\n{variant}, {source_label(grasps, setup)} grasps{' (closed loop)' if args.reperceive else ''}:")
+            want = None if setup is None else setup.to_json()
+            subset = [r for r in records if r["variant"] == variant and r["grasps"] == grasps
+                      and r.get("perception") == want]
             print(execution_table(subset, planners=planners, tablefmt="simple"))
     return 0

@@ -17,8 +17,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-NOISE_STREAM = 7919  # the depth noise's generator is seeded with (scene seed, this)
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
@@ -44,7 +42,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _noise_rng(seed: int) -> np.random.Generator:
-    return np.random.default_rng([seed, NOISE_STREAM])
+    from perception.pipeline import noise_rng
+
+    return noise_rng(seed)  # the same draws as executions on perceived grasps (`PerceptionSetup`)
 
 
 def _params(args: argparse.Namespace):

@@ -14,7 +14,7 @@ import logging
 import math
 import sys
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
@@ -25,6 +25,9 @@ from suite.execution.monitor import where
 from suite.execution.config import ExecutionConfig
 from suite.execution.simulate import execute_cycles
 from suite.run.records import FINAL_RETURN_NOT_EXECUTED
+
+if TYPE_CHECKING:
+    from perception.pipeline import PerceptionSetup
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +52,9 @@ class ExecutionJob:
         reperceive: plan each next can from a fresh rendering of the simulated cameras.
         replay_path: where to write the Meshcat replay HTML, or None.
         config: the simulation settings.
+        perception: with `grasps="perceived"`, how they are perceived (pipeline, segmentation,
+            sensor model; `perception.pipeline.PerceptionSetup`); None: the paper's pipeline on
+            the spec's cameras.
     """
 
     planner: str
@@ -62,6 +68,7 @@ class ExecutionJob:
     reperceive: bool = False
     replay_path: str | None = None
     config: ExecutionConfig = ExecutionConfig()
+    perception: PerceptionSetup | None = None
 
 
 def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob) -> list[tuple[int, tuple, str]]:
@@ -113,7 +120,8 @@ def can_pose_from(can_id: int, X_WC: np.ndarray) -> CanPose:
 def _closed_loop(job: ExecutionJob):
     """Between cycles: look again, rebuild the scene from where the cans now are, plan the next
     can, and hand its cycle to the simulation."""
-    from perception.pipeline import GRASP_CAMERA, detect_cans
+    from perception.pipeline import GRASP_CAMERA, detect_cans, detect_in_frames, noise_rng
+    from perception.side_view import SIDE_CAMERAS
     from scenes.grasp_rule import truth_grasp
     from scenes.render import render
     from suite.problems.cycle import build_problems
@@ -132,8 +140,15 @@ def _closed_loop(job: ExecutionJob):
         else:
             # Before the first pick the arm has not yet moved into view (as in open loop); later
             # frames were taken from the simulation just after the last release over the bin.
-            images = world.images if world.images is not None else render(job.scene, cameras=[GRASP_CAMERA])
-            detections, _ = detect_cans(images[GRASP_CAMERA], spec)
+            setup = job.perception
+            robust = setup is not None and setup.pipeline == "robust"
+            cams = [GRASP_CAMERA] + ([c for c in SIDE_CAMERAS if c in spec.cameras.poses] if robust else [])
+            images = world.images if world.images is not None else render(job.scene, cameras=cams)
+            if setup is None:
+                detections, _ = detect_cans(images[GRASP_CAMERA], spec)
+            else:  # a fresh noise draw per frame; the first frame's is `perceive`'s
+                rng = noise_rng(job.scene.seed, *([len(tried)] if tried else []))
+                detections = detect_in_frames(images, spec, setup=setup, rng=rng)
             if not detections:
                 return None, f"{len(cans)} can(s) left on the plate, none detected"
             grasp = detections[0].grasp
@@ -163,9 +178,11 @@ def run_execution(job: ExecutionJob) -> dict[str, Any]:
     # once: from the problems this job plans, or from the first grasp's problems alone.
     if job.reperceive:
         provider = _closed_loop(job)
-        q_home = first_problems(scene_grasps(scene, grasps=job.grasps)[:1])[0].q_start
+        q_home = first_problems(scene_grasps(scene, grasps=job.grasps, perception=job.perception)[:1])[0].q_start
     elif job.cans is None:
-        problems = first_problems(scene_grasps(scene, grasps=job.grasps))
+        problems = first_problems(scene_grasps(scene, grasps=job.grasps, perception=job.perception))
+        if not problems:
+            raise RuntimeError(f"no grasps to plan: {job.grasps} grasps found no can")
         provider, q_home = _open_loop(plan_cans(problems, job)), problems[0].q_start
     else:
         provider, q_home = _open_loop(job.cans), np.asarray(job.q_home, float)
@@ -174,6 +191,8 @@ def run_execution(job: ExecutionJob) -> dict[str, Any]:
                              meshcat=meshcat, cameras=job.reperceive and job.grasps == "perceived")
     record = outcome.to_json()
     record.update(grasps=job.grasps, reperceive=job.reperceive, config=dataclasses.asdict(job.config))
+    if job.perception is not None and job.grasps == "perceived":
+        record["perception"] = job.perception.to_json()
     if meshcat is not None:
         Path(job.replay_path).write_text(meshcat.StaticHtml(), encoding="utf-8")
         record["replay"] = Path(job.replay_path).name
@@ -339,7 +358,9 @@ def _guarded(job: ExecutionJob) -> dict[str, Any]:
 def _failed(job: ExecutionJob, message: str) -> dict[str, Any]:
     return {"planner": job.planner, "scene_seed": job.scene.seed, "variant": job.scene.variant,
             "cans_total": len(job.scene.cans), "error": message, "grasps": getattr(job, "grasps", None),
-            "reperceive": getattr(job, "reperceive", False)}
+            "reperceive": getattr(job, "reperceive", False),
+            **({"perception": job.perception.to_json()}
+               if getattr(job, "perception", None) is not None and getattr(job, "grasps", None) == "perceived" else {})}
 
 
 def write_moving_bin(out: Path, records: Sequence[dict[str, Any]]) -> Path:

@@ -115,15 +115,22 @@ class WorkerInit:
         worker_init()
 
 
-def scene_grasps(scene, *, grasps: str):
-    """The grasps to plan for: ground truth, or perceived from the rendered cameras."""
+def scene_grasps(scene, *, grasps: str, perception=None):
+    """The grasps to plan for: ground truth, or perceived from the rendered cameras.
+
+    Args:
+        perception: with `grasps="perceived"`, a `perception.pipeline.PerceptionSetup` (pipeline,
+            segmentation, sensor model); None: the paper's pipeline on the spec's cameras.
+    """
     from scenes.grasp_rule import truth_grasp
 
     if grasps == "truth":
         return [truth_grasp(scene, c) for c in scene.cans]
-    from perception.pipeline import perceive
+    from perception.pipeline import perceive, perceive_with
 
-    return [d.grasp for d in perceive(scene).detections]
+    if perception is None:
+        return [d.grasp for d in perceive(scene).detections]
+    return [d.grasp for d in perceive_with(scene, setup=perception).detections]
 
 
 def prepare_trials(config: CompareConfig, *, progress=None) -> list[TrialSpec]:
