@@ -176,13 +176,15 @@ def _record_world(k: int, outcome, items, out: Path, rows: list[dict]) -> None:
           f"({'/'.join(row['cache'])})", flush=True)
 
 
-def summary_name(selection: str) -> str:
-    """The summary file of a build of `selection` (NAME[:TIER[:FILTERS]]): one per tier and filters,
-    so that building regions for another tier of a dataset keeps the earlier build's figures."""
+def summary_name(selection: str, seeding: str = "chain") -> str:
+    """The summary file of a build of `selection` (NAME[:TIER[:FILTERS]]) with `seeding`: one per
+    tier, filters and seeding other than the chain, so that building regions for another tier of a
+    dataset, or with another seeding, keeps the earlier build's figures."""
     import re
 
     rest = selection.partition(":")[2] or "all"
-    return "build-" + re.sub(r"[^A-Za-z0-9._=+-]+", "_", rest) + ".json"
+    tail = "" if seeding == "chain" else f"-{seeding}"
+    return "build-" + re.sub(r"[^A-Za-z0-9._=+-]+", "_", rest) + tail + ".json"
 
 
 def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, items: list) -> int:
@@ -200,7 +202,7 @@ def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, i
         "worlds_detail": rows,
     }
     selection = args.dataset if args.tune_sample is None else f"{args.dataset}:tune-sample{args.tune_sample}"
-    (out / summary_name(selection)).write_text(json.dumps(summary, indent=1))
+    (out / summary_name(selection, options.seeding)).write_text(json.dumps(summary, indent=1))
     if not rows:
         print(f"no world was built: each of the {len(items)} failed (see above)", file=sys.stderr)
         return 1
