@@ -104,7 +104,7 @@ class GcsPlanner(PlannerBase):
 
     name: ClassVar[str] = "gcs"
     Config: ClassVar[type] = GcsConfig
-    search_space: ClassVar[dict[str, tuple]] = {"order": (1, 3), "max_rounded_paths": (5, 10)}
+    search_space: ClassVar[dict[str, tuple]] = {"seeding": ("chain", "cliques"), "order": (1, 3), "max_rounded_paths": (5, 10)}
     tuning_objective: ClassVar[str] = "length"
 
     def __init__(self, config: GcsConfig | None = None) -> None:
