@@ -22,16 +22,26 @@ def test_a_child_started_inside_starts_with_the_signals_ignored():
     ctx = mp.get_context("spawn")
     queue = ctx.Queue()
     proc = ctx.Process(target=_report_handlers, args=(queue,))
+    before = signal.getsignal(signal.SIGINT)  # SIG_IGN when the tests run in the background (nohup, &)
     with signals_blocked():
         proc.start()
     try:
         assert queue.get(timeout=300) == [True, True]  # a deadline only a hang reaches
     finally:
         proc.join(timeout=300)
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the parent's own is back
+    assert signal.getsignal(signal.SIGINT) is before  # the parent's own is back
 
 
 def test_a_signal_arriving_meanwhile_reaches_the_parent_afterwards():
+    # Python's own handler, also when the tests run in the background, where SIGINT starts ignored
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _expect_the_interrupt()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _expect_the_interrupt() -> None:
     with pytest.raises(KeyboardInterrupt):
         with signals_blocked():
             # to this thread, which blocks it (a signal to the process could go to another thread)
