@@ -90,21 +90,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def speed_list(text: str) -> tuple[float, ...]:
     """"0,0.05,0.1" -> (0.0, 0.05, 0.1): bin speeds (m/s), non-negative, finite, distinct, ascending."""
-    from scenes.schema import NonNeg, refusal
+    from scenes.schema import NonNeg
 
-    values = []
-    for part in text.split(","):
-        try:
-            v = float(part)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{part.strip()!r} in {text!r} is not a speed in m/s") from None
-        why = refusal(NonNeg, v)
-        if why is not None:
-            raise argparse.ArgumentTypeError(f"bin speed {part.strip()!r} (m/s): {why}")
-        values.append(v)
-    if len(set(values)) != len(values):
-        raise argparse.ArgumentTypeError(f"--moving-bin {text!r} names a speed twice")
-    return tuple(sorted(values))
+    return _number_list(text, tp=NonNeg, not_a="a speed in m/s", each="bin speed {} (m/s)",
+                        twice="--moving-bin {} names a speed twice")
 
 
 def moving_bin_scenario(args: argparse.Namespace, config: CompareConfig):
@@ -136,20 +125,29 @@ def moving_bin_scenario(args: argparse.Namespace, config: CompareConfig):
 
 def budget_list(text: str) -> tuple[float, ...]:
     """"0.05,0.2,1,5" -> (0.05, 0.2, 1.0, 5.0): positive, finite, distinct, in ascending order."""
-    from scenes.schema import Pos, refusal
+    from scenes.schema import Pos
+
+    return _number_list(text, tp=Pos, not_a="a number of seconds", each="budget {} (seconds)",
+                        twice="--budgets {} names a budget twice")
+
+
+def _number_list(text: str, *, tp, not_a: str, each: str, twice: str) -> tuple[float, ...]:
+    """A flag's comma-separated numbers, each allowed by `scenes.schema` type `tp`, distinct, in
+    ascending order; `each` and `twice` word the refusals ({} is the bad part, or the whole text)."""
+    from scenes.schema import refusal
 
     values = []
     for part in text.split(","):
         try:
             v = float(part)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{part.strip()!r} in {text!r} is not a number of seconds") from None
-        why = refusal(Pos, v)
+            raise argparse.ArgumentTypeError(f"{part.strip()!r} in {text!r} is not {not_a}") from None
+        why = refusal(tp, v)
         if why is not None:
-            raise argparse.ArgumentTypeError(f"budget {part.strip()!r} (seconds): {why}")
+            raise argparse.ArgumentTypeError(f"{each.format(repr(part.strip()))}: {why}")
         values.append(v)
     if len(set(values)) != len(values):
-        raise argparse.ArgumentTypeError(f"--budgets {text!r} names a budget twice")
+        raise argparse.ArgumentTypeError(twice.format(repr(text)))
     return tuple(sorted(values))
 
 
