@@ -223,12 +223,29 @@ def _draw_window(ranges: WindowRanges, spec: SceneSpec, rng: np.random.Generator
     return _with_layout(spec, plate_xy=spec.plate.center_m[:2], bin_xy=bin_xy, middle_m=middle, extra=extra)
 
 
+def _footprint_radius(shape: str, size) -> float:
+    """The bounding radius in the floor plane of an upright cylinder (radius, length) or a box."""
+    return size[0] if shape == "cylinder" else 0.5 * math.hypot(size[0], size[1])
+
+
+def _place_on_plate(spec: SceneSpec, radius: float, placed: list[tuple[np.ndarray, float]],
+                    rng: np.random.Generator) -> np.ndarray | None:
+    """A footprint centre on the plate, `radius` plus the edge margin inside its edges and 1 cm
+    clear of every placed footprint (centre, radius): up to 200 uniform draws; None if none fits."""
+    cx, cy, _ = spec.plate.center_m
+    sx, sy = spec.plate.size_m[:2]
+    m = radius + spec.cans.edge_margin_m
+    for _ in range(200):
+        p = np.array([rng.uniform(cx - sx / 2 + m, cx + sx / 2 - m), rng.uniform(cy - sy / 2 + m, cy + sy / 2 - m)])
+        if all(np.linalg.norm(p - q) >= radius + r + 0.01 for q, r in placed):
+            return p
+    return None
+
+
 def _draw_clutter(ranges: ClutterRanges, spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:
     n_cans = int(rng.integers(ranges.cans[0], ranges.cans[1] + 1))
     gap = _u(rng, ranges.min_gap_m)
     n_dis = int(rng.integers(ranges.distractors[0], ranges.distractors[1] + 1))
-    cx, cy, _ = spec.plate.center_m
-    sx, sy = spec.plate.size_m[:2]
     top = spec.plate_top_z_m
     extra: list[Obstacle] = []
     placed: list[tuple[np.ndarray, float]] = []  # footprint centre, bounding radius
@@ -238,14 +255,10 @@ def _draw_clutter(ranges: ClutterRanges, spec: SceneSpec, rng: np.random.Generat
         size = tuple(_u(rng, r) for r in model["size"])
         color = model["colors"][int(rng.integers(len(model["colors"])))]
         yaw = float(rng.uniform(-math.pi, math.pi))
-        radius = size[0] if model["shape"] == "cylinder" else 0.5 * math.hypot(size[0], size[1])
+        radius = _footprint_radius(model["shape"], size)
         height = size[1] if model["shape"] == "cylinder" else size[2]
-        for _ in range(200):
-            m = radius + spec.cans.edge_margin_m
-            p = np.array([rng.uniform(cx - sx / 2 + m, cx + sx / 2 - m), rng.uniform(cy - sy / 2 + m, cy + sy / 2 - m)])
-            if all(np.linalg.norm(p - q) >= radius + r + 0.01 for q, r in placed):
-                break
-        else:
+        p = _place_on_plate(spec, radius, placed, rng)
+        if p is None:
             continue
         placed.append((p, radius))
         X = _rz(yaw, (p[0], p[1], top + height / 2))
@@ -262,22 +275,15 @@ def _draw_lookalike(ranges: LookalikeRanges, spec: SceneSpec, rng: np.random.Gen
 
     drawn = _draw_clutter(ranges, spec, rng)
     r, h, top = spec.can.radius_m, spec.can.height_m, spec.plate_top_z_m
-    cx, cy, _ = spec.plate.center_m
-    sx, sy = spec.plate.size_m[:2]
-    placed = [(o.pose()[:2, 3], o.size_m[0] if o.shape == "cylinder" else 0.5 * math.hypot(o.size_m[0], o.size_m[1]))
-              for o in drawn.extra]
+    placed = [(o.pose()[:2, 3], _footprint_radius(o.shape, o.size_m)) for o in drawn.extra]
     extra = list(drawn.extra)
     n_hour = int(rng.integers(ranges.hourglasses[0], ranges.hourglasses[1] + 1))
     n_dent = int(rng.integers(ranges.dented[0], ranges.dented[1] + 1))
     for i, kind in enumerate(["hourglass"] * n_hour + ["dented"] * n_dent):
         lying = kind == "dented" and rng.random() < spec.cans.lying_probability
         radius = h / 2 if lying else r
-        for _ in range(200):
-            m = radius + spec.cans.edge_margin_m
-            p = np.array([rng.uniform(cx - sx / 2 + m, cx + sx / 2 - m), rng.uniform(cy - sy / 2 + m, cy + sy / 2 - m)])
-            if all(np.linalg.norm(p - q) >= radius + rq + 0.01 for q, rq in placed):
-                break
-        else:
+        p = _place_on_plate(spec, radius, placed, rng)
+        if p is None:
             continue
         placed.append((p, radius))
         yaw = float(rng.uniform(-math.pi, math.pi))
