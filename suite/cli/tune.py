@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _tune(args: argparse.Namespace, out: Path) -> int:
     from planners.tuned import config_path, objective as tuning_objective
-    from suite.report.tuning import RULE, WEIGHTINGS, choose, evaluate, table_rows, weak_families
+    from suite.report.tuning import RULE, WEIGHTINGS, choose, choose_explained, evaluate, table_rows, weak_families
     from suite.run.runner import run_trials
 
     candidates = grid(args.planner)
@@ -147,12 +147,14 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
         evaluated.append((settings, recorded(run_dir, trials)))
     results = evaluate(evaluated)
     objective = tuning_objective(args.planner)
-    chosen = choose(results, objective=objective, weighting="family")
+    explained = choose_explained(results, objective=objective, weighting="family")
+    chosen = explained.index
     pooled = choose(results, objective=objective, weighting="pooled")
     rows = table_rows(results, chosen=chosen, pooled=pooled)
     _print_table(rows)
     weak = weak_families(results, chosen=chosen)
-    print(f"chosen ({objective} objective, families weigh equally): {json.dumps(results[chosen].settings, default=str)}"
+    print(f"chosen ({objective} objective, families weigh equally): {json.dumps(results[chosen].settings, default=str)}, "
+          f"decided by {explained.decided_by}"
           + (f"; under 50% on {', '.join(weak)} where another candidate does better" if weak else ""))
     print(f"pooled over problems (the rule before recycle-v3) it would be: {json.dumps(results[pooled].settings, default=str)}")
     if args.write:
@@ -165,6 +167,9 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
             "rule": RULE,
             "weighting": f"family: {WEIGHTINGS['family']}",
             "objective": objective,
+            "decided_by": explained.decided_by,
+            "ties": {"solved": list(explained.solved_tied), "objective": list(explained.objective_tied),
+                     "other_metric": list(explained.other_tied)},
             "pooled_choice": {"settings": results[pooled].settings, "weighting": f"pooled: {WEIGHTINGS['pooled']}"},
             "dataset": {"name": ds.name, "hash": ds.hash, "split": "tune", "problems": len(problems),
                         "per_family": args.per_family, "non_trivial_only": True},
@@ -184,13 +189,22 @@ def _print_table(rows: list[dict]) -> None:
 
     families = sorted({f for r in rows for f in r["by_family"]})
     headers = ["", "settings", "solved", *families, "time to solve (s)", "per family (s)", "length ratio",
-               "per family"]
+               "per family", "time vs chosen [95%]", "length vs chosen [95%]"]
     body = [[("*" if r["chosen"] else "") + ("p" if r.get("chosen_pooled") else ""), json.dumps(r["settings"], default=str),
              r["solved"], *(r["by_family"].get(f, "-") for f in families), r["time_to_solve_median_s"],
              r["family_time_to_solve_median_s"], r["length_ratio_common_median"],
-             r["family_length_ratio_common_median"]] for r in rows]
+             r["family_length_ratio_common_median"], _versus(r.get("time_vs_chosen")),
+             _versus(r.get("length_vs_chosen"))] for r in rows]
     print("* chosen (families weigh equally); p: the choice pooled over problems")
     print(tabulate(body, headers=headers, tablefmt="simple", missingval="n/a"))
+
+
+def _versus(v: list | None) -> str:
+    """A paired ratio against the chosen candidate, '1.23 [1.10, 1.40]'."""
+    if not v:
+        return "-"
+    fmt = lambda x: "n/a" if x is None else f"{x:.3g}"  # noqa: E731
+    return f"{fmt(v[0])} [{fmt(v[1])}, {fmt(v[2])}]"
 
 
 def _write_yaml(path: Path, data: dict) -> None:

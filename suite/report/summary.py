@@ -19,6 +19,7 @@ import numpy as np
 
 from suite.report.outcomes import FEW_PROBLEMS
 from suite.report.summary_execution import EXECUTION_INTRO, execution_table
+from suite.report.summary_search import post_processing, search_summary
 from suite.report.summary_stats import (
     SUMMARY_METRICS,
     GroupSummary,
@@ -73,7 +74,9 @@ def summary_json(
     the dataset's best known by more than 0.1%), cold_start {cold_trials,
     warm_trials, planning_time_s: {cold, warm}, setup_time_s: {cold, warm}} (time medians are over
     warm trials), attribution {engine, trials, queries, s_per_query, query_share} (or null for a
-    planner that does not count its collision queries), metrics: {METRIC: {median,
+    planner that does not count its collision queries), search {trials, post_processing, solve_time_s,
+    simplify_time_s, length_before_rad, length_after_rad, length_kept} (OMPL planners; null otherwise),
+    post_processing (what the planner does to its first solution, from its config), metrics: {METRIC: {median,
     q1, q3, n}}, time_to_solve_s, common_subset: {METRIC: {median, n}}, by_family: {FAMILY: {success,
     metrics}}, by_kind: {KIND: {success, metrics}}}}, metrics (their definitions), paired: [...].
     """
@@ -102,6 +105,9 @@ def summary_json(
             "best_known": best_known_agreement(records, p),
             "attribution": attribution_summary(records, p),
             "cold_start": cold_start(records, p),
+            "search": search_summary(records, p),
+            "post_processing": post_processing(next((r.get("planner_config") for r in records
+                                                     if r.get("planner") == p), None)),
             "metrics": {m: _stats_json(g.metrics[m]) for m in SUMMARY_METRICS},
             TIME_TO_SOLVE: _stats_json(g.time_to_solve),
             "common_subset": {m: {"median": _num(common[m][p].median), "n": common[m][p].n} for m in SUMMARY_METRICS},

@@ -409,6 +409,12 @@ def summary_markdown(
     if any(r.get("attribution") for r in records):
         md += ["", "## Where planning time goes", "", ATTRIBUTION_INTRO, ""]
         md.append(tabulate(*reversed(attribution_rows(records, planners)), tablefmt="github"))
+    from suite.report.summary_search import SEARCH_INTRO, search_rows
+
+    search = search_rows(records, planners)
+    if search[1]:
+        md += ["", "## Search and simplification (OMPL planners)", "", SEARCH_INTRO, ""]
+        md.append(tabulate(*reversed(search), tablefmt="github"))
     if any("warm" in r for r in records):
         md += ["", "## Cold starts", "", COLD_INTRO, ""]
         md.append(tabulate(*reversed(cold_rows(records, planners)), tablefmt="github"))

@@ -6,16 +6,23 @@ families of each family's median figure, so that an easy family with many proble
 for a hard one. "pooled" (the rule before recycle-v3) counts problems and takes medians over all
 of them; its choice is reported beside the shipped one.
 
-Rule (documented in docs/ and written into the tuned-config file):
+Rule (documented in docs/planners.md and written into the tuned-config file):
 0. a candidate that solves under half of a family's problems while another candidate solves more
-   of them is out, if any candidate is left (the issue's requirement: no shipped setting below 50%
-   on a family where a documented one does better; `weak_families`);
+   of them is out, if any candidate is left (`weak_families`);
 1. the most distinct problems solved wins;
-2. among candidates that solve as many, a feasibility planner ("time") takes the lowest median
-   time to solve (failures at the budget), an optimizing planner ("length") the lowest median
-   length over the best known path on the problems every candidate solved;
-3. a difference within `TOLERANCE` (10% in time, 1% in length), or within `ABS_TOLERANCE` (5 ms
-   in time), is a tie, and a tie keeps the earlier candidate (the grid lists class defaults first).
+2. among candidates that solve as many, the objective decides: a feasibility planner ("time") the
+   lowest median time to solve (failures at the budget), an optimizing planner ("length") the
+   lowest median length over the best known path on the problems every candidate solved;
+3. a candidate ties with the best on a metric unless the two differ beyond noise and beyond a
+   margin: a paired bootstrap over the problems both ran (`paired_ratio`: per problem the log ratio
+   of the two candidates' figures, the same weighting of families, scenes resampled within each
+   family) gives a 95% interval of the ratio, and the difference is real only when that interval
+   excludes 1 and the ratio is beyond `MARGIN` (10% in time, 1% in length: differences that would
+   not change a reader's conclusion). The noise is measured on the candidates' own trials; there
+   is no absolute band;
+4. among the candidates tied on the objective, the better value of the other metric wins (shorter
+   paths for a time tie, faster for a length tie), with the same test for a tie; among those still
+   tied, the lower objective estimate; list order decides only between exactly equal estimates.
 """
 
 from __future__ import annotations
@@ -31,9 +38,12 @@ from suite.report.outcomes import Outcome, outcomes, solved_count
 
 #: The rule in one line, as written into a tuned-config file.
 RULE = ("candidates under 50% on a family where another candidate solves more of it are out (if any is left); "
-        "then most distinct problems solved; ties: lowest median time to solve (failures at the budget) for "
-        "objective 'time', lowest median length ratio on the problems every candidate solved for 'length', "
-        "within 10% or 5 ms (time) or 1% (length) counted as equal; then the earlier candidate")
+        "then most distinct problems solved; then the objective: lowest median time to solve (failures at the "
+        "budget) for 'time', lowest median length ratio on the problems every candidate solved for 'length'; a "
+        "candidate ties with the best unless a paired bootstrap over the problems both ran (95%, scenes resampled "
+        "within families) excludes equality and the ratio is beyond 10% (time) or 1% (length); a tie on the "
+        "objective goes to the better value of the other metric (same test), then to the lower objective "
+        "estimate; list order only between equal estimates")
 #: How the rule weighs families: its name, and what it changes in RULE.
 WEIGHTINGS = {
     "family": "families weigh equally: 'solved' is the mean over families of each family's solved fraction, "
@@ -41,14 +51,17 @@ WEIGHTINGS = {
     "pooled": "problems weigh equally: 'solved' counts problems and each median is over all problems",
 }
 TUNING_METRICS = ("planning_time_s", "length_ratio", "path_length_rad")
-#: Relative differences of the tie-break figure treated as equal: 10% in median time (timings on a
-#: shared machine vary that much), 1% in median length ratio.
-TOLERANCE = {"time": 0.10, "length": 0.01}
-#: Absolute differences treated as equal: 5 ms in median time. With compiled checks `rrt`'s medians
-#: are 2-3 ms, where 10% is 0.3 ms: below what a trial's clock can tell apart on a shared 2-core
-#: machine (one scheduler quantum is 4 ms at Linux's common CONFIG_HZ=250), and two tunings of
-#: the same candidates chose differently. None for length (a ratio: no absolute scale).
-ABS_TOLERANCE = {"time": 0.005, "length": 0.0}
+#: The equivalence margin: a real difference (beyond noise) smaller than this share is still a tie,
+#: 10% in median time, 1% in median length ratio. Not a noise estimate: the noise is the paired
+#: bootstrap's interval (`paired_ratio`), measured on the candidates' own trials.
+MARGIN = {"time": 0.10, "length": 0.01}
+#: The paired bootstrap: resamples, interval level and its generator's seed (fixed, so that a
+#: re-evaluation of the same records chooses the same candidate).
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_LEVEL = 0.95
+BOOTSTRAP_SEED = 20261128
+#: The other metric of each objective: what a tie on the objective is broken on.
+OTHER = {"time": "length", "length": "time"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,6 +78,9 @@ class CandidateResult:
     family_solved_mean: float = math.nan
     family_time_to_solve_median_s: float = math.nan
     family_length_ratio_common_median: float = math.nan
+    #: per distinct problem (key) its family, scene, time to solve (failures at the budget) and
+    #: length ratio (NaN unless solved): what the paired tests compare
+    per_problem: dict[tuple, tuple[str, tuple, float, float]] = dataclasses.field(default_factory=dict, compare=False)
 
 
 def _median(values: Sequence[float]) -> float:
@@ -93,12 +109,114 @@ def evaluate(candidates: Sequence[tuple[dict[str, Any], Sequence[dict]]]) -> lis
             family_solved_mean=float(np.mean([solved_count(v) / len(v) for v in families.values()])) if families else math.nan,
             family_time_to_solve_median_s=_median([_median([o.time_to_solve_s for o in v]) for v in families.values()]),
             family_length_ratio_common_median=_median([_median(v) for v in fam_common.values()]),
+            per_problem={k: (o.family, o.scene, o.time_to_solve_s,
+                             o.metrics["length_ratio"] if o.successes else math.nan) for k, o in oc.items()},
         ))
     return out
 
 
-def choose(results: Sequence[CandidateResult], *, objective: str, weighting: str = "family") -> int:
-    """The index of the chosen candidate (see the module's rule) under a weighting of WEIGHTINGS."""
+@dataclasses.dataclass(frozen=True)
+class PairedRatio:
+    """How candidate b's figure compares with candidate a's on the problems both have a value for:
+    the ratio b/a (the weighting's median of per-problem log ratios, exponentiated) and its
+    paired-bootstrap interval; NaNs when there is nothing to pair (then only the margin decides)."""
+
+    ratio: float
+    lo: float
+    hi: float
+    problems: int
+
+
+def _metric_value(entry: tuple[str, tuple, float, float], metric: str) -> float:
+    return entry[2] if metric == "time" else entry[3]
+
+
+def _weighted_median(logs: np.ndarray, families: np.ndarray, *, family: bool) -> float:
+    if not family:
+        return float(np.median(logs))
+    return float(np.median([np.median(logs[families == f]) for f in np.unique(families)]))
+
+
+def paired_ratio(a: CandidateResult, b: CandidateResult, *, metric: str, weighting: str = "family") -> PairedRatio:
+    """Candidate b against candidate a on one metric ("time": time to solve, failures at the
+    budget, on every problem both ran; "length": length ratio on the problems both solved).
+
+    Per problem the log of b's figure over a's; the statistic is their median (pooled) or the
+    median over families of each family's median (family); the interval resamples scenes with
+    replacement within each family (`BOOTSTRAP_RESAMPLES`, seeded), so that one station's
+    problems count as one observation and every family keeps its weight."""
+    keys = [k for k in a.per_problem if k in b.per_problem]
+    rows = []
+    for k in keys:
+        va, vb = _metric_value(a.per_problem[k], metric), _metric_value(b.per_problem[k], metric)
+        if math.isfinite(va) and math.isfinite(vb) and va > 0 and vb > 0:
+            rows.append((a.per_problem[k][0], a.per_problem[k][1], math.log(vb / va)))
+    if not rows:
+        return PairedRatio(math.nan, math.nan, math.nan, 0)
+    family = weighting == "family"
+    fams = np.array([r[0] for r in rows])
+    logs = np.array([r[2] for r in rows], float)
+    point = _weighted_median(logs, fams, family=family)
+    if len(rows) < 2:
+        return PairedRatio(math.exp(point), math.nan, math.nan, len(rows))
+    # scenes within families: index lists per (family, scene)
+    strata: dict[str, dict[tuple, list[int]]] = {}
+    for i, (f, scene, _) in enumerate(rows):
+        strata.setdefault(f, {}).setdefault(scene, []).append(i)
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    stats = np.empty(BOOTSTRAP_RESAMPLES)
+    groups = {f: list(by_scene.values()) for f, by_scene in strata.items()}
+    for n in range(BOOTSTRAP_RESAMPLES):
+        idx: list[int] = []
+        for members in groups.values():
+            for j in rng.integers(0, len(members), size=len(members)):
+                idx.extend(members[j])
+        sel = np.asarray(idx)
+        stats[n] = _weighted_median(logs[sel], fams[sel], family=family)
+    alpha = (1 - BOOTSTRAP_LEVEL) / 2
+    lo, hi = np.percentile(stats, [100 * alpha, 100 * (1 - alpha)])
+    return PairedRatio(math.exp(point), math.exp(float(lo)), math.exp(float(hi)), len(rows))
+
+
+def _cost(r: CandidateResult, metric: str, *, family: bool) -> float:
+    if metric == "time":
+        v = r.family_time_to_solve_median_s if family else r.time_to_solve_median_s
+    else:
+        v = r.family_length_ratio_common_median if family else r.length_ratio_common_median
+    return v if math.isfinite(v) else math.inf
+
+
+def differs(best: CandidateResult, other: CandidateResult, *, metric: str, weighting: str = "family") -> bool:
+    """True when `other` is worse than `best` on the metric beyond noise and beyond the margin
+    (module rule, step 3). Without per-problem figures (a summary only) the margin alone decides."""
+    family = weighting == "family"
+    cb, co = _cost(best, metric, family=family), _cost(other, metric, family=family)
+    if math.isinf(co) and not math.isinf(cb):
+        return True
+    if not (math.isfinite(cb) and math.isfinite(co)):
+        return False
+    beyond_margin = co > cb * (1 + MARGIN[metric])
+    pr = paired_ratio(best, other, metric=metric, weighting=weighting)
+    if not math.isfinite(pr.lo):
+        return beyond_margin
+    return beyond_margin and pr.lo > 1.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Choice:
+    """The chosen candidate and how the rule got there."""
+
+    index: int
+    #: the candidates left after each step: solved, tied on the objective, tied on the other metric
+    solved_tied: tuple[int, ...]
+    objective_tied: tuple[int, ...]
+    other_tied: tuple[int, ...]
+    #: which step decided: "solved", "objective", "other metric", "objective estimate" or "list order"
+    decided_by: str
+
+
+def choose_explained(results: Sequence[CandidateResult], *, objective: str, weighting: str = "family") -> Choice:
+    """The chosen candidate (the module's rule) with the candidates each step left."""
     if objective not in ("time", "length"):
         raise ValueError(f"objective must be 'time' or 'length', got {objective!r}")
     if weighting not in WEIGHTINGS:
@@ -106,29 +224,50 @@ def choose(results: Sequence[CandidateResult], *, objective: str, weighting: str
     admissible = [i for i in range(len(results)) if not weak_families(results, chosen=i)]
     pool = admissible or list(range(len(results)))
     family = weighting == "family"
+    other = OTHER[objective]
 
     def solved(r: CandidateResult) -> float:
         return r.family_solved_mean if family else r.solved
 
-    def cost(r: CandidateResult) -> float:
-        if objective == "time":
-            v = r.family_time_to_solve_median_s if family else r.time_to_solve_median_s
-        else:
-            v = r.family_length_ratio_common_median if family else r.length_ratio_common_median
-        return v if math.isfinite(v) else math.inf
-
     best = max(solved(results[i]) for i in pool)
     tied = [i for i in pool if solved(results[i]) >= best - 1e-12]
-    lowest = min(cost(results[i]) for i in tied)
-    # a difference within the tolerance is noise: the earlier candidate (the defaults first) keeps it
-    band = max(lowest * TOLERANCE[objective], ABS_TOLERANCE[objective])
-    return next(i for i in tied if cost(results[i]) <= lowest + band)
+    lead = min(tied, key=lambda i: (_cost(results[i], objective, family=family), i))
+    on_objective = [i for i in tied if not differs(results[lead], results[i], metric=objective, weighting=weighting)]
+    lead_other = min(on_objective, key=lambda i: (_cost(results[i], other, family=family), i))
+    on_other = [i for i in on_objective
+                if not differs(results[lead_other], results[i], metric=other, weighting=weighting)]
+    costs = [_cost(results[i], objective, family=family) for i in on_other]
+    lowest = min(costs)
+    index = next(i for i, c in zip(on_other, costs) if c == lowest)
+    if len(tied) == 1:
+        how = "solved"
+    elif len(on_objective) == 1:
+        how = "objective"
+    elif len(on_other) == 1:
+        how = "other metric"
+    elif costs.count(lowest) == 1:
+        how = "objective estimate"
+    else:
+        how = "list order"
+    return Choice(index, tuple(tied), tuple(on_objective), tuple(on_other), how)
+
+
+def choose(results: Sequence[CandidateResult], *, objective: str, weighting: str = "family") -> int:
+    """The index of the chosen candidate (see the module's rule) under a weighting of WEIGHTINGS."""
+    return choose_explained(results, objective=objective, weighting=weighting).index
 
 
 def table_rows(results: Sequence[CandidateResult], *, chosen: int, pooled: int | None = None) -> list[dict[str, Any]]:
-    """The justification table as plain values (one row per candidate)."""
+    """The justification table as plain values (one row per candidate): its figures, and its time
+    and length against the chosen candidate's (the paired ratio and its 95% interval)."""
     def num(v: float, digits: int = 4) -> float | None:
         return round(v, digits) if math.isfinite(v) else None
+
+    def versus(i: int, metric: str) -> list[float | None] | None:
+        if i == chosen or not results[i].per_problem:
+            return None
+        pr = paired_ratio(results[chosen], results[i], metric=metric)
+        return [num(pr.ratio, 3), num(pr.lo, 3), num(pr.hi, 3)] if math.isfinite(pr.ratio) else None
 
     return [{
         "chosen": i == chosen,
@@ -142,6 +281,8 @@ def table_rows(results: Sequence[CandidateResult], *, chosen: int, pooled: int |
         "family_solved_mean": num(r.family_solved_mean),
         "family_time_to_solve_median_s": num(r.family_time_to_solve_median_s),
         "family_length_ratio_common_median": num(r.family_length_ratio_common_median),
+        **({} if versus(i, "time") is None else {"time_vs_chosen": versus(i, "time")}),
+        **({} if versus(i, "length") is None else {"length_vs_chosen": versus(i, "length")}),
     } for i, r in enumerate(results)]
 
 

@@ -225,7 +225,8 @@ def failures_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: Run
 
 def more_stats_html(records: Sequence[dict[str, Any]], pairs: Sequence[PairedComparison],
                     planners: Sequence[str]) -> str:
-    """Paired comparisons, cold starts and where planning time goes, when the records hold them."""
+    """Paired comparisons, where planning time goes, the OMPL planners' search and simplification apart and
+    cold starts, when the records hold them."""
     out = []
     if pairs:
         out += ["<h3>Paired comparisons</h3>", inline_md(
@@ -235,6 +236,11 @@ def more_stats_html(records: Sequence[dict[str, Any]], pairs: Sequence[PairedCom
     if any(r.get("attribution") for r in records):
         out += ["<h3>Where planning time goes</h3>", inline_md(ATTRIBUTION_INTRO),
                 table(*attribution_rows(records, planners))]
+    from suite.report.summary_search import SEARCH_INTRO, search_rows
+
+    search = search_rows(records, planners)
+    if search[1]:
+        out += ["<h3>Search and simplification (OMPL planners)</h3>", inline_md(SEARCH_INTRO), table(*search)]
     if any("warm" in r for r in records):
         out += ["<h3>Cold starts</h3>", inline_md(COLD_INTRO), table(*cold_rows(records, planners))]
     return "".join(out)

@@ -274,3 +274,34 @@ def test_best_known_agreement_counts_equal_paths_and_lists_certified_shorter_one
     write_summary(tmp_path, recs)
     assert json.loads((tmp_path / "summary.json").read_text())["planners"]["a"]["best_known"]["equal"] == 1
     assert "shorter (0.500)" in (tmp_path / "summary.md").read_text()
+
+
+def test_search_and_simplification_are_reported_apart_for_ompl_planners():
+    """OMPL's Benchmark reports solve and simplify time and length before and after apart: so does
+    the summary, with each planner's post-processing named from its config."""
+    from suite.report.summary_search import post_processing, search_rows, search_summary
+
+    recs = []
+    for i, (solve, simp, before, after) in enumerate([(0.01, 0.002, 4.0, 2.0), (0.03, 0.004, 6.0, 3.0),
+                                                      (0.02, 0.003, 5.0, 4.0)]):
+        r = record("rrt", seed=i, length_rad=after, time_s=solve + simp)
+        r["planner_config"] = {"simplifier": "rope", "simplify_time_s": 0.1}
+        r["stats"] = {"solve_time_s": solve, "simplify_time_s": simp, "length_before_rad": before,
+                      "length_after_rad": after}
+        recs.append(r)
+    recs.append(record("trajopt", seed=0, length_rad=1.0, time_s=0.3))
+    s = search_summary(recs, "rrt")
+    assert s["trials"] == 3 and s["solve_time_s"] == pytest.approx(0.02) and s["simplify_time_s"] == pytest.approx(0.003)
+    assert (s["length_before_rad"], s["length_after_rad"]) == (5.0, 3.0)
+    assert s["length_kept"] == pytest.approx(0.5)  # the median of 0.5, 0.5, 0.8
+    assert search_summary(recs, "trajopt") is None
+    headers, rows = search_rows(recs, ["rrt", "trajopt"])
+    assert [r[0] for r in rows] == ["rrt"] and "ropeShortcutPath" in rows[0][1]
+    assert post_processing({"simplifier": "rope+full", "simplify_time_s": 0.1}).startswith("rope shortcut, then")
+    assert post_processing({"simplifier": "rope", "simplify_time_s": 0.0}) == "none"
+    assert post_processing({"shortcut": True, "shortcut_max_iters": 100}) == "roboplan PathShortcutter (100 random shortcuts)"
+    assert post_processing({"num_control_points": 10}) == "none"
+    from suite.report.summary_tables import summary_markdown
+
+    md = summary_markdown(recs, pairs=[], planners=["rrt", "trajopt"])
+    assert "## Search and simplification (OMPL planners)" in md

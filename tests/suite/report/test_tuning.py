@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
 import pytest
 
 from planners.registry import planner_class
@@ -12,7 +13,7 @@ from planners.registry import BUILTIN
 from planners.tuned import objective, search_space, tuned_settings
 from scenes.errors import SuiteError
 from suite.cli.tune import grid, tuning_problems
-from suite.report.tuning import CandidateResult, choose, evaluate, weak_families
+from suite.report.tuning import CandidateResult, choose, choose_explained, differs, evaluate, paired_ratio, weak_families
 from suite.run.trial import make_config
 from tests.suite.report.test_summary import record
 
@@ -41,21 +42,79 @@ def _result(solved, time_s, ratio, by_family=None):
                            length_ratio_common_median=ratio)
 
 
-def test_choice_rule_success_first_then_the_objective_then_order():
+def test_choice_rule_success_first_then_the_objective_then_the_other_metric():
     results = [_result(8, 0.1, 1.5), _result(9, 0.9, 1.9), _result(9, 0.3, 1.2), _result(9, 0.3, 1.2)]
     assert choose(results, objective="time", weighting="pooled") == 2  # most solved, then fastest, then the earlier
     assert choose(results, objective="length", weighting="pooled") == 2
     assert choose([_result(9, 0.3, 1.4), _result(9, 0.9, 1.1)], objective="length", weighting="pooled") == 1
     assert choose([_result(9, math.nan, math.nan), _result(9, 0.5, 1.3)], objective="time", weighting="pooled") == 1
-    # within the tolerance the earlier candidate (the defaults) keeps it: 1% in length, 10% in time
-    assert choose([_result(9, 0.3, 1.005), _result(9, 0.3, 1.0)], objective="length", weighting="pooled") == 0
-    assert choose([_result(9, 0.3, 1.02), _result(9, 0.3, 1.0)], objective="length", weighting="pooled") == 1
-    assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 0
-    assert choose([_result(9, 0.2, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 1
-    # milliseconds: up to 5 ms more is a tie however large a fraction (3 or 6.9 ms against 2 ms); 6.1 ms more is not
-    assert choose([_result(9, 0.003, 1.0), _result(9, 0.002, 1.0)], objective="time", weighting="pooled") == 0
-    assert choose([_result(9, 0.0069, 1.0), _result(9, 0.002, 1.0)], objective="time", weighting="pooled") == 0
-    assert choose([_result(9, 0.0081, 1.0), _result(9, 0.002, 1.0)], objective="time", weighting="pooled") == 1
+    # within the margin (1% in length, 10% in time) the objective ties, and the other metric decides
+    assert choose([_result(9, 0.3, 1.005), _result(9, 0.2, 1.0)], objective="length", weighting="pooled") == 1
+    assert choose([_result(9, 0.3, 1.005), _result(9, 0.3, 1.0)], objective="length", weighting="pooled") == 1
+    assert choose([_result(9, 0.3, 1.02), _result(9, 0.1, 1.0)], objective="length", weighting="pooled") == 1
+    assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 1
+    assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.2)], objective="time", weighting="pooled") == 0
+    # no absolute band: milliseconds differ like seconds do (the 5 ms band let list order choose)
+    assert choose([_result(9, 0.003, 1.0), _result(9, 0.002, 1.0)], objective="time", weighting="pooled") == 1
+    # equal on both: list order
+    assert choose([_result(9, 0.1, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 0
+
+
+def test_the_issue_rrt_table_chooses_the_shorter_of_the_tied_fastest():
+    """rrt's tune table (issue 50): four candidates solve all; three within the old 5 ms band.
+    {1.0, rope} and {0.5, rope} tie on time; {0.5, rope} is 1.6x shorter and must win."""
+    def fam(time_s, ratio):
+        return dataclasses.replace(_result(115, time_s, ratio), family_solved_mean=1.0,
+                                   family_time_to_solve_median_s=time_s, family_length_ratio_common_median=ratio)
+
+    rows = [fam(0.0022, 2.30), fam(0.0021, 1.46), fam(0.0052, 1.48), fam(0.0090, 1.13)]
+    explained = choose_explained(rows, objective="time")
+    assert explained.index == 1 and explained.decided_by == "other metric"
+    assert explained.objective_tied == (0, 1)
+
+
+def _paired(times, lengths, family="wall"):
+    """A candidate with per-problem figures (one scene per problem)."""
+    per = {(i,): (family if isinstance(family, str) else family[i], (f"s{i}",), t, l)
+           for i, (t, l) in enumerate(zip(times, lengths))}
+    fam_t = float(np.median(times))
+    return dataclasses.replace(_result(len(times), fam_t, float(np.median(lengths))), per_problem=per,
+                               family_solved_mean=1.0, family_time_to_solve_median_s=fam_t,
+                               family_length_ratio_common_median=float(np.median(lengths)))
+
+
+def test_a_difference_within_the_paired_noise_is_a_tie_and_a_consistent_one_is_not():
+    rng = np.random.default_rng(5)
+    base = rng.uniform(0.01, 0.1, 60)
+    lengths = np.full(60, 1.5)
+    # b is 30% slower on half the problems and 30% faster on the other half: medians differ, no real difference
+    noisy = base * np.where(np.arange(60) % 2 == 0, 1.3, 1 / 1.3)
+    a, b = _paired(base, lengths), _paired(noisy * 1.15, lengths * 0.8)
+    pr = paired_ratio(a, b, metric="time")
+    assert pr.problems == 60 and pr.lo < 1.0 < pr.hi
+    assert not differs(a, b, metric="time")
+    # consistently 20% slower on every problem: a real difference beyond the margin
+    c = _paired(base * 1.2, lengths * 0.8)
+    pr = paired_ratio(a, c, metric="time")
+    assert pr.ratio == pytest.approx(1.2) and pr.lo > 1.0
+    assert differs(a, c, metric="time")
+    # consistently 5% slower: real, but inside the 10% margin
+    assert not differs(a, _paired(base * 1.05, lengths), metric="time")
+    # a time tie goes to the shorter paths
+    assert choose([a, b], objective="time") == 1
+    assert choose([a, c], objective="time") == 0
+
+
+def test_the_bootstrap_keeps_family_weights_and_is_seeded():
+    fams = ["wall"] * 30 + ["window"] * 6
+    times = np.linspace(0.01, 0.05, 36)
+    a = _paired(times, np.ones(36), family=fams)
+    b = _paired(times * np.r_[np.ones(30), np.full(6, 2.0)], np.ones(36), family=fams)
+    family = paired_ratio(a, b, metric="time", weighting="family")
+    pooled = paired_ratio(a, b, metric="time", weighting="pooled")
+    assert family.ratio == pytest.approx(math.sqrt(2.0))  # median of the two families' medians (log 1 and log 2)
+    assert pooled.ratio == pytest.approx(1.0)  # 30 wall problems outvote 6 window ones
+    assert paired_ratio(a, b, metric="time") == family  # same records, same interval
 
 
 def test_weak_family_is_flagged_only_when_another_candidate_does_better():
