@@ -21,8 +21,9 @@ Rule (documented in docs/planners.md and written into the tuned-config file):
    not change a reader's conclusion). The noise is measured on the candidates' own trials; there
    is no absolute band;
 4. among the candidates tied on the objective, the better value of the other metric wins (shorter
-   paths for a time tie, faster for a length tie), with the same test for a tie; among those still
-   tied, the lower objective estimate; list order decides only between exactly equal estimates.
+   paths for a time tie, faster for a length tie), with the same test for a tie; only candidates
+   tied on both metrics are decided by list order (the class defaults come first: nothing measured
+   tells them apart, so the default stays).
 """
 
 from __future__ import annotations
@@ -42,8 +43,8 @@ RULE = ("candidates under 50% on a family where another candidate solves more of
         "budget) for 'time', lowest median length ratio on the problems every candidate solved for 'length'; a "
         "candidate ties with the best unless a paired bootstrap over the problems both ran (95%, scenes resampled "
         "within families) excludes equality and the ratio is beyond 10% (time) or 1% (length); a tie on the "
-        "objective goes to the better value of the other metric (same test), then to the lower objective "
-        "estimate; list order only between equal estimates")
+        "objective goes to the better value of the other metric (same test); list order only between candidates "
+        "tied on both")
 #: How the rule weighs families: its name, and what it changes in RULE.
 WEIGHTINGS = {
     "family": "families weigh equally: 'solved' is the mean over families of each family's solved fraction, "
@@ -211,7 +212,7 @@ class Choice:
     solved_tied: tuple[int, ...]
     objective_tied: tuple[int, ...]
     other_tied: tuple[int, ...]
-    #: which step decided: "solved", "objective", "other metric", "objective estimate" or "list order"
+    #: which step decided: "solved", "objective", "other metric" or "list order (tied on both metrics)"
     decided_by: str
 
 
@@ -236,19 +237,15 @@ def choose_explained(results: Sequence[CandidateResult], *, objective: str, weig
     lead_other = min(on_objective, key=lambda i: (_cost(results[i], other, family=family), i))
     on_other = [i for i in on_objective
                 if not differs(results[lead_other], results[i], metric=other, weighting=weighting)]
-    costs = [_cost(results[i], objective, family=family) for i in on_other]
-    lowest = min(costs)
-    index = next(i for i, c in zip(on_other, costs) if c == lowest)
+    index = min(on_other)
     if len(tied) == 1:
         how = "solved"
     elif len(on_objective) == 1:
         how = "objective"
     elif len(on_other) == 1:
         how = "other metric"
-    elif costs.count(lowest) == 1:
-        how = "objective estimate"
     else:
-        how = "list order"
+        how = "list order (tied on both metrics)"
     return Choice(index, tuple(tied), tuple(on_objective), tuple(on_other), how)
 
 

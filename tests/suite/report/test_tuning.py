@@ -50,14 +50,17 @@ def test_choice_rule_success_first_then_the_objective_then_the_other_metric():
     assert choose([_result(9, math.nan, math.nan), _result(9, 0.5, 1.3)], objective="time", weighting="pooled") == 1
     # within the margin (1% in length, 10% in time) the objective ties, and the other metric decides
     assert choose([_result(9, 0.3, 1.005), _result(9, 0.2, 1.0)], objective="length", weighting="pooled") == 1
-    assert choose([_result(9, 0.3, 1.005), _result(9, 0.3, 1.0)], objective="length", weighting="pooled") == 1
+    assert choose([_result(9, 0.3, 1.005), _result(9, 0.3, 1.0)], objective="length", weighting="pooled") == 0
     assert choose([_result(9, 0.3, 1.02), _result(9, 0.1, 1.0)], objective="length", weighting="pooled") == 1
-    assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 1
+    assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 0
     assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.2)], objective="time", weighting="pooled") == 0
     # no absolute band: milliseconds differ like seconds do (the 5 ms band let list order choose)
     assert choose([_result(9, 0.003, 1.0), _result(9, 0.002, 1.0)], objective="time", weighting="pooled") == 1
-    # equal on both: list order
+    # tied on both metrics: list order (the defaults first)
     assert choose([_result(9, 0.1, 1.0), _result(9, 0.1, 1.0)], objective="time", weighting="pooled") == 0
+    assert choose([_result(9, 0.105, 1.0), _result(9, 0.1, 1.005)], objective="time", weighting="pooled") == 0
+    explained = choose_explained([_result(9, 0.105, 1.0), _result(9, 0.1, 1.005)], objective="time", weighting="pooled")
+    assert explained.decided_by == "list order (tied on both metrics)"
 
 
 def test_the_issue_rrt_table_chooses_the_shorter_of_the_tied_fastest():
