@@ -159,6 +159,7 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
     print(f"pooled over problems (the rule before recycle-v3) it would be: {json.dumps(results[pooled].settings, default=str)}")
     if args.write:
         from planners.worlds import checker
+        from suite.run.runner import git_commit
 
         data = {
             "planner": args.planner,
@@ -176,6 +177,7 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
             "time_limit_s": args.time_limit_s,
             "checker": checker(),  # what the candidates' python-fcl checks ran in (planners.worlds)
             "date_utc": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d"),
+            "commit": git_commit(),  # "+dirty": the code that ran was not this commit's
             "weak_families": weak,
             "table": rows,
         }
