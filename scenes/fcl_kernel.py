@@ -76,7 +76,7 @@ from scenes.fcl_kernel_data import (
     SCR_W,
     SCR_WALL,
     SCRATCH,
-    _CACHE,
+    CACHE_PATH,
     _f,
     _i,
     _jit,
@@ -367,5 +367,5 @@ def compile_kernels() -> float:
 
     motion_check(q, np.ones(7), 0.5, F, I, C, np.zeros(4, np.bool_), np.zeros(WORK, np.int64))
     _WARM["s"] = time.perf_counter() - t
-    log.debug("fcl kernels ready in %.2f s (cache %s)", _WARM["s"], _CACHE)
+    log.debug("fcl kernels ready in %.2f s (cache %s)", _WARM["s"], CACHE_PATH)
     return _WARM["s"]
