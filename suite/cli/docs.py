@@ -1,5 +1,7 @@
 """`python -m suite docs`: rewrite the figures of README.md and docs/ that come from committed files
-(the reference run, the tuned settings, the default dataset); `--check` only says which differ."""
+(the reference run, the tuned settings, the default dataset); `--check` only says which differ.
+Either refuses, writing nothing, when a block reads a run whose manifest records a dirty tree or no
+commit (one line naming each such manifest, exit 2)."""
 
 from __future__ import annotations
 
@@ -10,7 +12,8 @@ from pathlib import Path
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--check", action="store_true",
-                   help="write nothing; exit 1 naming every block whose page differs from its data")
+                   help="write nothing; exit 1 naming every block whose page differs from its data (exit 2 naming "
+                        "the manifest when a block reads a run of a dirty tree)")
     p.add_argument("--root", default=".", help="the repository's root (default: the current directory)")
 
 
