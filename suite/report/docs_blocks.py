@@ -12,8 +12,9 @@ from its data: `render(root, write=False)` lists the blocks whose text differs (
 
 Provenance: a block that reads a run (a directory with `manifest.json`) reads it through
 `run_dir`, which refuses a run whose manifest records no commit or a dirty tree (`+dirty`: the
-code that ran was not a commit's). `render` computes every block before it writes anything, so a
-refusal writes nothing and names every such manifest in one line.
+code that ran was not a commit's); the tuned-settings block refuses a tune file whose `commit` is
+`+dirty` (files written before tune kept its commit have none). `render` computes every block
+before it writes anything, so a refusal writes nothing and names every such file in one line.
 """
 
 from __future__ import annotations
@@ -63,11 +64,18 @@ def run_dir(root: Path, run: Path) -> Path:
         commit = json.loads(path.read_text(encoding="utf-8")).get("git_commit")
     except (OSError, ValueError, AttributeError):
         raise UnpublishableRun(f"{shown}, which is missing or not a run manifest") from None
+    _check_commit(shown, commit, required=True)
+    return root / run
+
+
+def _check_commit(shown: str, commit: Any, *, required: bool) -> None:
+    """Refuse (UnpublishableRun naming `shown`) a commit marked `+dirty`, or none when `required`."""
     if not isinstance(commit, str) or not commit:
-        raise UnpublishableRun(f"{shown}, which records no commit")
+        if required:
+            raise UnpublishableRun(f"{shown}, which records no commit")
+        return
     if commit.endswith(DIRTY):
         raise UnpublishableRun(f"{shown}, which records a dirty tree ({commit})")
-    return root / run
 
 
 def run_dirs(root: Path, runs: list[Path]) -> list[Path]:
@@ -128,8 +136,17 @@ def tuned_settings_table(root: Path) -> str:
 
     lines = ["| planner | tuned settings | objective | tuned on | problems | the choice solved | date |",
              "|---|---|---|---|---|---|---|"]
-    for path in sorted((root / "planners" / "configs").glob("*.yaml")):
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    files = [(path, yaml.safe_load(path.read_text(encoding="utf-8")) or {})
+             for path in sorted((root / "planners" / "configs").glob("*.yaml"))]
+    bad = []
+    for path, data in files:  # a tune written before tune recorded its commit has none: not refused
+        try:
+            _check_commit(path.relative_to(root).as_posix(), data.get("commit"), required=False)
+        except UnpublishableRun as exc:
+            bad.append(str(exc))
+    if bad:
+        raise UnpublishableRun("; ".join(bad))
+    for path, data in files:
         ds = data.get("dataset") or {}
         chosen = next((row for row in data.get("table") or [] if row.get("chosen")), {})
         settings = ", ".join(f"`{k}: {json.dumps(v)}`" for k, v in (data.get("settings") or {}).items()) or "defaults"

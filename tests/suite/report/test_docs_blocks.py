@@ -4,11 +4,13 @@ only from runs of clean commits."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
+import yaml
 
 from scenes.errors import SuiteError
 from suite.cli import main
@@ -51,6 +53,8 @@ def _copy(tmp_path: Path) -> Path:
             shutil.copy(ROOT / rel, tmp_path / rel)
     for manifest in tmp_path.glob("results/**/manifest.json"):
         _set_commit(manifest, json.loads(manifest.read_text())["git_commit"].removesuffix(docs_blocks.DIRTY))
+    for tune in tmp_path.glob("planners/configs/*.yaml"):
+        tune.write_text(re.sub(r"(?m)^(commit: .*?)\+dirty", r"\1", tune.read_text(encoding="utf-8")), encoding="utf-8")
     return tmp_path
 
 
@@ -118,6 +122,19 @@ def test_the_command_refuses_in_one_line_naming_the_file(tmp_path, capsys):
     assert main(["docs", "--check", "--root", str(root)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "results/peers/manifest.json" in err and "+dirty" in err
+
+
+def test_a_tune_file_of_a_dirty_tree_is_refused(tmp_path):
+    root = _copy(tmp_path)
+    path = root / "planners/configs/rrt.yaml"
+    data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    path.write_text(yaml.safe_dump({**data, "commit": "403cb5f+dirty"}), encoding="utf-8")
+    with pytest.raises(docs_blocks.UnpublishableRun, match=r"tuned-settings \(docs/planners.md\) reads "
+                       r"planners/configs/rrt.yaml, which records a dirty tree \(403cb5f\+dirty\)"):
+        docs_blocks.render(root, write=False)
+    for commit in ("403cb5f", None):  # a clean commit, or none (a tune written before tune kept its commit)
+        path.write_text(yaml.safe_dump({**data, "commit": commit}), encoding="utf-8")
+        docs_blocks.render(root, write=False)
 
 
 def test_every_dirty_run_is_named_in_the_one_line(tmp_path):
