@@ -8,6 +8,12 @@ few checks, then only the samples their distance bounds do not prove free. With 
 motion check a motion must also be proved free between its samples (`BatchMotionValidator`). `OmplProblem` creates every OMPL object of one solve
 and releases them in dependency order.
 
+A motion's samples are n equal steps, n = max(1, ceil(|q1 - q0| / resolution_rad)), in the
+largest-joint norm (`linf`, the validator's rule: every joint moves at most `resolution_rad` per
+step) or in the joint-space L2 norm (`l2`: roboplan's `hasCollisionsAlongPath` rule, checked
+against roboplan 0.7.0; every joint moves at most `resolution_rad` too, and a diagonal motion gets
+up to sqrt(7) times as many samples; `motion_steps`).
+
 Randomness: OMPL draws every RNG's seed from one process-global seed generator. A trial restarts
 that generator at a seed derived from `problem.seed` and the problem's identity before it creates
 any OMPL object, so all of the trial's OMPL randomness (RRT-Connect's StateSampler, the
@@ -19,6 +25,7 @@ simplifier has its own RNG.)
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -30,6 +37,8 @@ from planners.base import PlanningProblem
 from scenes.identity_rule import LEGACY_RULE
 
 DOF = 7
+#: The norms a motion's sample count may be measured in (`motion_steps`).
+RESOLUTION_NORMS = ("linf", "l2")
 
 
 # --- OMPL process state ----------------------------------------------------------------------------
@@ -70,6 +79,23 @@ def trial_seed(problem: PlanningProblem) -> int:
 # --- collision checking ----------------------------------------------------------------------------
 
 
+def motion_steps(d: np.ndarray, resolution_rad: float, norm: str) -> int:
+    """The steps n of a straight motion d = q1 - q0 (rad) checked at samples q0 + (i / n) d,
+    i = 1..n: max(1, ceil(|d| / resolution_rad)), |d| the largest joint's move (`linf`) or the
+    joint-space L2 norm (`l2`, roboplan's rule: `ceil(distance / max_step_size)` steps)."""
+    size = float(np.max(np.abs(d))) if norm == "linf" else math.sqrt(float(np.dot(d, d)))
+    return max(1, math.ceil(size / resolution_rad))
+
+
+def joint_resolution_for_steps(d: np.ndarray, n: int, fallback_rad: float) -> float:
+    """A joint resolution at which the world's `motion_samples_free` (which counts steps in the
+    largest-joint norm: ceil(max_j |d_j| / resolution)) takes exactly `n` steps of motion d:
+    max_j |d_j| / (n - 0.5), so that the ceiling lands on n whatever the rounding. `fallback_rad`
+    for a motion of zero length (one step whatever the resolution)."""
+    big = float(np.max(np.abs(d)))
+    return big / (n - 0.5) if big > 0 else fallback_rad
+
+
 class BatchMotionValidator(ob.MotionValidator):
     """Checks a straight motion in one call to the world (`CollisionWorld.motion_samples_free`:
     batched python-fcl queries, samples proved free by their neighbours' distances skipped)
@@ -80,33 +106,73 @@ class BatchMotionValidator(ob.MotionValidator):
     world and pairs); an `unproved` segment counts as blocked. The start state is taken as valid
     (as OMPL's DiscreteMotionValidator does).
 
+    `norm` is how a motion's samples are counted (`motion_steps`): `linf` (the validator's rule)
+    or `l2` (roboplan's). The world counts in the largest-joint norm, so an `l2` motion is handed
+    to it at the joint resolution that gives the same n samples (`joint_resolution_for_steps`).
+
     Attributes:
         motions: motions checked; certified_calls, certify_s: exact segment checks made and their
             seconds (0 without `certify`).
+        accepted: with `count_accepted`, the motions that passed so far (`accepted_samples` gives
+            their samples): one per tree edge when read at the end of a tree-growing search.
     """
 
-    def __init__(self, si: ob.SpaceInformation, world, resolution_rad: float, *, certify: bool = False) -> None:
+    def __init__(self, si: ob.SpaceInformation, world, resolution_rad: float, *, certify: bool = False,
+                 norm: str = "linf", count_accepted: bool = False) -> None:
         super().__init__(si)
+        if norm not in RESOLUTION_NORMS:
+            raise ValueError(f"norm must be one of {', '.join(RESOLUTION_NORMS)}, got {norm!r}")
         self.world = world
         self.resolution_rad = resolution_rad
         self.certify = certify
+        self.norm = norm
         self.motions = 0
         self.certified_calls = 0
         self.certify_s = 0.0
+        self.count_accepted = count_accepted
+        # the motions that passed: their steps (l2), or their ends, counted only when asked for
+        # (`accepted_samples`: the check's own cost stays what it was)
+        self._accepted: list = []
+
+    @property
+    def accepted(self) -> int:
+        return len(self._accepted)
+
+    def accepted_samples(self, count: int | None = None) -> int:
+        """The samples (n each, the end state included) of the first `count` motions that passed
+        (all of them by default); 0 without `count_accepted`."""
+        items = self._accepted[:count]
+        if not items:
+            return 0
+        if self.norm != "linf":
+            return int(sum(items))
+        d = np.abs(np.array([b for _, b in items]) - np.array([a for a, _ in items])).max(axis=1)
+        return int(np.maximum(1, np.ceil(d / self.resolution_rad)).sum())  # `motion_steps`, all at once
 
     def motion_free(self, a: np.ndarray, b: np.ndarray) -> bool:
         """Whether the straight motion a -> b passes this validator's check."""
-        if not self.world.motion_samples_free(a, b, resolution_rad=self.resolution_rad):
+        if self.norm == "linf":
+            n = None
+            free = self.world.motion_samples_free(a, b, resolution_rad=self.resolution_rad)
+        else:
+            d = b - a
+            n = motion_steps(d, self.resolution_rad, self.norm)
+            free = self.world.motion_samples_free(
+                a, b, resolution_rad=joint_resolution_for_steps(d, n, self.resolution_rad))
+        if not free:
             return False
-        if not self.certify:
-            return True
-        from scenes.fcl_certify import CERTIFIED, certifier
+        if self.certify:
+            from scenes.fcl_certify import CERTIFIED, certifier
 
-        t0 = time.perf_counter()
-        verdict = certifier(self.world).certify(np.stack([a, b])).verdict
-        self.certified_calls += 1
-        self.certify_s += time.perf_counter() - t0
-        return verdict == CERTIFIED
+            t0 = time.perf_counter()
+            verdict = certifier(self.world).certify(np.stack([a, b])).verdict
+            self.certified_calls += 1
+            self.certify_s += time.perf_counter() - t0
+            if verdict != CERTIFIED:
+                return False
+        if self.count_accepted:
+            self._accepted.append((a, b) if n is None else n)
+        return True
 
     def checkMotion(self, s1, s2) -> bool:  # OMPL's name
         self.motions += 1
@@ -130,7 +196,7 @@ class OmplProblem:
     """
 
     def __init__(self, world, q_start: np.ndarray, q_goal: np.ndarray, *, resolution_rad: float,
-                 optimizing: bool, certify: bool = False) -> None:
+                 optimizing: bool, certify: bool = False, norm: str = "linf", count_accepted: bool = False) -> None:
         lo, hi = world.robot.lower_rad, world.robot.upper_rad
         self.space = ob.RealVectorStateSpace(DOF)
         self.bounds = ob.RealVectorBounds(DOF)
@@ -140,7 +206,8 @@ class OmplProblem:
         self.space.setBounds(self.bounds)
         self.si = ob.SpaceInformation(self.space)
         self.si.setStateValidityChecker(lambda s: world.is_free(np.array(s[0:DOF])))
-        self.validator = BatchMotionValidator(self.si, world, resolution_rad, certify=certify)
+        self.validator = BatchMotionValidator(self.si, world, resolution_rad, certify=certify, norm=norm,
+                                              count_accepted=count_accepted)
         self.si.setMotionValidator(self.validator)
         self.si.setup()
         self.start, self.goal = self.si.allocState(), self.si.allocState()  # freed by their owners when released

@@ -25,6 +25,7 @@ from ompl import geometric as og
 
 from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, snapped_to_ends
 from planners.ompl_adapter import (
+    RESOLUTION_NORMS,
     OmplProblem,
     drop_collinear,
     path_array,
@@ -56,6 +57,10 @@ class OmplConfig:
             planning and simplifying (rad): 0.05 for `rrt` (its few long segments are re-checked
             at `validate_resolution_rad`), 0.01 for the optimizing planners (their paths run
             along obstacles and would often fail the finer check).
+        resolution_norm: the norm a motion's step is measured in: "linf" (default, the
+            validator's rule: n = ceil(max_j |dq_j| / resolution_rad) equal steps) or "l2"
+            (roboplan's `collision_check_step_size` rule: n = ceil(|dq|_2 / resolution_rad), up to
+            sqrt(7) times as many samples on a diagonal motion). `planners.ompl_adapter.motion_steps`.
         simplifier: how OMPL's PathSimplifier shortens the path: "rope" (`ropeShortcutPath`:
             deterministic, pulls the path tight from the start), "full" (`simplify`: randomized
             shortcuts, B-spline smoothing and vertex reduction, until converged or out of time) or
@@ -63,8 +68,11 @@ class OmplConfig:
         rope_delta_rad: `ropeShortcutPath`'s spacing of intermediate states (joint-space L2, rad).
         simplify_time_s: budget of the "full" simplification (s); 0 to skip simplification.
         validate_resolution_rad: the simplified path is re-checked at this joint resolution (the
-            orchestrator's validator uses 0.01 rad); if it fails, planning is repeated once with
-            `resolution_rad` set to this value. None to skip.
+            orchestrator's validator uses 0.01 rad, largest-joint norm, whatever
+            `resolution_norm` is); if it fails, planning is repeated once with `resolution_rad`
+            set to this value (in `resolution_norm`). Only when it is finer than
+            `resolution_rad`; None to skip (roboplan has no such re-check: the peers' equal
+            settings skip it).
         interpolate_rad: if set, the returned path is densified so that no joint moves more than
             this between consecutive waypoints; otherwise the simplified path's waypoints.
         time_limit_s: the budget of planning + simplification (s); None for the problem's
@@ -78,6 +86,7 @@ class OmplConfig:
 
     range_rad: float | None = None
     resolution_rad: float = 0.05
+    resolution_norm: str = "linf"
     simplifier: str = "rope"
     rope_delta_rad: float = 1.0
     simplify_time_s: float = 0.1
@@ -92,6 +101,9 @@ class OmplConfig:
             raise SuiteError(f"range_rad must be > 0 or None, got {self.range_rad!r}")
         if not 0 < self.resolution_rad <= 0.2:
             raise SuiteError(f"resolution_rad must be in (0, 0.2] rad, got {self.resolution_rad!r}")
+        if self.resolution_norm not in RESOLUTION_NORMS:
+            raise SuiteError(f"resolution_norm must be one of {', '.join(RESOLUTION_NORMS)}, "
+                             f"got {self.resolution_norm!r}")
         if self.simplifier not in SIMPLIFIERS:
             raise SuiteError(f"simplifier must be one of {', '.join(SIMPLIFIERS)}, got {self.simplifier!r}")
         if self.motion_check not in MOTION_CHECKS:
@@ -273,10 +285,12 @@ class _OmplPlanner(PlannerBase):
         simplify_budget_s = min(cfg.simplify_time_s, 0.5 * budget_s)
         solve_budget_s = budget_s - simplify_budget_s
         op = OmplProblem(world, problem.q_start, problem.q_goal, resolution_rad=resolution_rad,
-                         optimizing=self.optimizing, certify=cfg.motion_check == "certified")
+                         optimizing=self.optimizing, certify=cfg.motion_check == "certified",
+                         norm=cfg.resolution_norm, count_accepted=not self.optimizing)
         op.attach(self._make(op.si))
         stats: dict[str, Any] = {"solver": self.solver, "resolution_rad": resolution_rad,
-                                 "motion_check": cfg.motion_check}
+                                 "resolution_norm": cfg.resolution_norm, "motion_check": cfg.motion_check,
+                                 "post_processing": cfg.simplifier if simplify_budget_s > 0 else "none"}
         path = simplifier = None
         progress: list[list] = []  # optimizing planners: [time in the solve, best cost or None] points
         try:
@@ -291,6 +305,13 @@ class _OmplPlanner(PlannerBase):
             else:
                 status = op.planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
             solve_time_s = time.perf_counter() - t_solve
+            if not self.optimizing:
+                # the search's check density: the samples of the motions that passed, one per tree
+                # edge (RRT-Connect adds an edge for each), before the simplifier checks its own
+                edges = op.validator.accepted
+                samples = op.validator.accepted_samples(edges)
+                stats.update(tree_edges=edges, edge_samples=samples, samples_per_edge=samples / edges if edges else None,
+                             samples_per_edge_from="counted")
             code = status.getStatus()
             T = ob.PlannerStatus.PlannerStatusType
             stats.update(solve_time_s=solve_time_s, solver_status=status.asString(),

@@ -9,16 +9,21 @@ to another planner or another checker: what roboplan returns is what the validat
 Settings and how they map to the suite's `rrt` (docs/peers.md):
 - `range_rad` is roboplan's `max_connection_distance`, the joint-space L2 length of one extension,
   `rrt`'s `range_rad` (OMPL's `setRange`) in the same norm.
-- `collision_check_step_rad` is roboplan's `collision_check_step_size`: edges are checked at
-  samples at most this far apart in the joint-space L2 norm, which bounds every joint's step too.
-  0.01 rad by default, the validator's resolution (roboplan's own default is 0.05).
+- `collision_check_step_rad` is roboplan's `collision_check_step_size`: an edge of joint-space L2
+  length L is checked at n = max(1, ceil(L / step)) equal steps (its interior samples i / n, and its
+  end; roboplan 0.7.0's `hasCollisionsAlongPath`, checked against the library by probing a
+  grazing edge at 3,000 step sizes), which bounds every joint's step too. 0.01 rad by default, the
+  validator's resolution (roboplan's own default is 0.05). `rrt` samples a motion the same way with
+  `resolution_norm: l2` (`planners.ompl_adapter.motion_steps`).
 - `shortcut` runs roboplan's `PathShortcutter` (random shortcuts checked at the same step), as
   `rrt` runs OMPL's rope shortcut.
 
 Collision queries: roboplan's checks happen in C++ and are not counted by roboplan. The stats give
 the tree's size, a lower bound of the state checks (the samples of every edge kept in the two
 trees; rejected extensions and the shortcutter's checks are not counted) and that bound times the
-cost of one check measured in `prepare` (outside the clock).
+cost of one check measured in `prepare` (outside the clock). The same count gives the search's
+check density, `samples_per_edge` (computed from the kept edges' lengths and the step, as
+`samples_per_edge_from: computed` says; `rrt` counts its own).
 """
 
 from __future__ import annotations
@@ -113,16 +118,23 @@ def roboplan_world(problem: PlanningProblem) -> tuple[RoboplanWorld, float]:
     return hit
 
 
-def edge_checks(nodes, step_rad: float) -> int:
-    """State checks of the edges kept in a tree: ceil(length / step) samples per edge (the
-    checked samples of an edge at most `step_rad` apart, its end included)."""
+def edge_samples(nodes, step_rad: float) -> tuple[int, int]:
+    """(edges, samples) of the edges kept in a tree: max(1, ceil(L2 length / step)) samples per
+    edge (roboplan's steps of an edge, its end included; its start, a tree node, is re-checked
+    too and not counted)."""
     if not nodes:
-        return 0
+        return 0, 0
     C = np.array([n.config for n in nodes], float)
     parent = np.array([n.parent_id for n in nodes])
     child = parent >= 0
     d = np.linalg.norm(C[child] - C[parent[child]], axis=1)
-    return int(np.maximum(1, np.ceil(d / step_rad)).sum())
+    return int(child.sum()), int(np.maximum(1, np.ceil(d / step_rad)).sum())
+
+
+def edge_checks(nodes, step_rad: float) -> int:
+    """State checks of the edges kept in a tree: ceil(length / step) samples per edge (the
+    checked samples of an edge at most `step_rad` apart, its end included)."""
+    return edge_samples(nodes, step_rad)[1]
 
 
 class RoboplanRRTPlanner(PlannerBase):
@@ -169,7 +181,9 @@ class RoboplanRRTPlanner(PlannerBase):
         search_s = budget_s - (time.perf_counter() - t0) - (cfg.shortcut_reserve_s if cfg.shortcut else 0.0)
         seed = trial_seed(problem)
         stats: dict[str, Any] = {"solver": self.solver, "seed": seed, "range_rad": cfg.range_rad,
-                                 "resolution_rad": cfg.collision_check_step_rad}
+                                 "resolution_rad": cfg.collision_check_step_rad, "resolution_norm": "l2",
+                                 "post_processing": (f"PathShortcutter({cfg.shortcut_max_iters})"
+                                                     if cfg.shortcut else "none")}
         if search_s <= 0:
             return PlanResult(PlanStatus.TIMEOUT, None, {**stats, "reason": "no time left for the search",
                                                          "reason_code": FailureReason.BUDGET_SPENT.value})
@@ -188,8 +202,11 @@ class RoboplanRRTPlanner(PlannerBase):
         t_count = time.perf_counter()
         trees = rrt.getNodes()
         stats["graph_vertices"] = sum(len(t) for t in trees)
-        checks = sum(edge_checks(t, cfg.collision_check_step_rad) for t in trees)
+        counted = [edge_samples(t, cfg.collision_check_step_rad) for t in trees]
+        edges, checks = sum(e for e, _ in counted), sum(c for _, c in counted)
         stats.update(roboplan_checks_min=checks, roboplan_check_s=check_s, roboplan_query_s_min=checks * check_s,
+                     tree_edges=edges, edge_samples=checks, samples_per_edge=checks / edges if edges else None,
+                     samples_per_edge_from="computed",
                      count_time_s=time.perf_counter() - t_count)  # this bookkeeping, inside the clock
         if path is None:
             stats["reason"] = error
