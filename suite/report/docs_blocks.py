@@ -251,26 +251,12 @@ def perception_table(root: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
-PEERS_EQUAL_RUNS = Path("results") / "peers-equal"
-
-
 def peers_equal_table(root: Path) -> str:
-    """docs/peers.md: `rrt` and `roboplan-rrt` at the same range, one committed run per range."""
-    lines = ["| range (rad) | planner | solved | time to solve, median (s) | queries (median) | µs a query | query share |",
-             "|---|---|---|---|---|---|---|"]
-    runs = []
-    found = sorted((root / PEERS_EQUAL_RUNS).iterdir()) if (root / PEERS_EQUAL_RUNS).is_dir() else []
-    for d in run_dirs(root, [d.relative_to(root) for d in found]):
-        manifest = json.loads((d / "manifest.json").read_text(encoding="utf-8"))
-        summary = json.loads((d / "summary.json").read_text(encoding="utf-8"))
-        ranges = {p: c.get("range_rad") for p, c in (manifest["config"].get("planner_configs") or {}).items()}
-        runs.append((min(r for r in ranges.values() if r is not None), summary))
-    for rng, summary in sorted(runs, key=lambda x: x[0]):
-        for name, p in summary["planners"].items():
-            cells = [f"{rng:g}", f"`{name}`", f"{p['success']['k']}/{p['success']['n']}",
-                     f"{p['time_to_solve_s']['median']:.2f}", *_attribution_cells(p)]
-            lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    """docs/peers.md: `rrt` against `roboplan-rrt` at equal check density, over seeds and problems,
+    from `suite.report.peers_equal`'s analysis of runs that each name a clean commit."""
+    from suite.report.peers_equal import docs_block
+
+    return docs_block(root, check_runs=lambda runs: run_dirs(root, runs))
 
 
 #: `bench execution --json` of every planner on perceived grasps under the Kinect v1 model

@@ -24,8 +24,6 @@ SOURCES = ("results/reference", "planners/configs", "results/perception", "resul
 DIRTY_TODAY = {
     "peers-table": "results/peers/manifest.json records 98a5172+dirty: re-run results/peers from a clean "
                    "commit, regenerate with `python -m suite docs`, then remove this entry",
-    "peers-equal-table": "results/peers-equal/range-1/manifest.json records 7230441+dirty: re-run it from a clean "
-                         "commit, regenerate with `python -m suite docs`, then remove this entry",
 }
 
 
@@ -89,8 +87,6 @@ def test_a_changed_figure_is_found_and_rewritten(tmp_path):
     ("results/reference/manifest.json", "72304418d2456191c366944d523ccbe15a9dbba7+dirty",
      "answer-table (README.md) reads results/reference/manifest.json, which records a dirty tree "
      "(72304418d2456191c366944d523ccbe15a9dbba7+dirty)"),
-    ("results/peers-equal/range-2/manifest.json", "560cce5a4d22976dfd8f57ed362ddc9d49fa5e2a+dirty",
-     "peers-equal-table (docs/peers.md) reads results/peers-equal/range-2/manifest.json, which records a dirty tree"),
     ("results/peers/manifest.json", None, "peers-table (README.md) reads results/peers/manifest.json, which records "
      "no commit"),
 ])
@@ -139,8 +135,7 @@ def test_a_tune_file_of_a_dirty_tree_is_refused(tmp_path):
 
 def test_every_dirty_run_is_named_in_the_one_line(tmp_path):
     root = _copy(tmp_path)
-    dirty = ("results/peers/manifest.json", "results/peers-equal/range-1/manifest.json",
-             "results/peers-equal/range-2/manifest.json")
+    dirty = ("results/peers/manifest.json", "results/reference/manifest.json")
     for m in dirty:
         _set_commit(root / m, "0" * 40 + "+dirty")
     with pytest.raises(docs_blocks.UnpublishableRun) as err:
