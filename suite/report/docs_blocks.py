@@ -107,9 +107,10 @@ def answer_table(root: Path) -> str:
             c[0] += int(e.get("cans_in_bin", 0))
             c[1] += int(e.get("cans_total", 0))
     lines = [("| planner | success (95% CI) | exact verdict: certified / unproved / collision | time to solve (s) "
-              "| length / best known | min clearance (mm) | cans in the bin, in physics |"),
+              "| length / best known (post-processing) | min clearance (mm) | cans in the bin, in physics |"),
              "|---|---|---|---|---|---|---|"]
     for name, p in summary["planners"].items():
+        post = p.get("post_processing")
         s = p["success"]
         lo, hi = (round(100 * v) for v in s["ci95"])
         cert = p.get("certification") or {}
@@ -123,7 +124,7 @@ def answer_table(root: Path) -> str:
             f"{s['k']}/{s['n']} ({_pct(s['k'], s['n'])} [{lo}, {hi}])",
             f"{cert.get('certified', 0)} / {cert.get('unproved', 0)} / {cert.get('collision', 0)}",
             "-" if tts is None else f"{tts:.3f}",
-            "-" if ratio is None else f"{ratio:.2f}",
+            ("-" if ratio is None else f"{ratio:.2f}") + ("" if post is None else f" ({post})"),
             "-" if clear is None else f"{1000 * clear:.1f}",
             "-" if k is None else f"{k}/{n} |",
         ]))
