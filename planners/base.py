@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import time
+from collections.abc import Callable
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
@@ -62,6 +64,62 @@ class FailureReason(str, enum.Enum):
 #: The motions of the paper's pick-and-place cycle, in order.
 PROBLEM_KINDS = ("approach", "descend", "lift", "transit", "return")
 
+#: The clocks a planning budget is measured on (s): "wall" (`time.perf_counter`, the elapsed time a
+#: user waits) and "cpu" (`time.process_time`: the CPU time of the planner's process, all of its
+#: threads: OMPL's PRM checks for a solution in a thread of its own, Drake's GCS rounds paths in
+#: parallel, so the calling thread's time alone would miss work). A process runs one trial at a
+#: time, so its CPU time across `plan` is the trial's. Looked up when read (a test may fake one).
+CLOCKS: dict[str, Callable[[], float]] = {"wall": time.perf_counter, "cpu": time.process_time}
+BUDGET_CLOCKS = tuple(CLOCKS)
+
+
+def clock_now(clock: str) -> float:
+    """The current reading of budget clock `clock` ("wall" or "cpu"), s."""
+    return CLOCKS[clock]()
+
+
+@dataclasses.dataclass(frozen=True)
+class Budget:
+    """A planning budget on one clock: what a planner's deadline checks read.
+
+    Attributes:
+        clock: "wall" or "cpu" (`BUDGET_CLOCKS`).
+        start: the clock's reading when the budget started (s).
+        deadline: the clock's reading at which it is spent (s).
+    """
+
+    clock: str
+    start: float
+    deadline: float
+
+    def __post_init__(self) -> None:
+        if self.clock not in CLOCKS:
+            from scenes.errors import SuiteError
+
+            raise SuiteError(f"budget clock {self.clock!r}; allowed: {', '.join(BUDGET_CLOCKS)}")
+
+    @classmethod
+    def starting_now(cls, seconds: float, *, clock: str = "wall") -> "Budget":
+        """`seconds` on `clock` from now."""
+        start = CLOCKS[clock]() if clock in CLOCKS else 0.0
+        return cls(clock, start, start + float(seconds))
+
+    def now(self) -> float:
+        """The clock's reading (s)."""
+        return CLOCKS[self.clock]()
+
+    def spent_s(self) -> float:
+        """Seconds of the budget used so far, on its clock."""
+        return self.now() - self.start
+
+    def left_s(self) -> float:
+        """Seconds left before the deadline, on its clock (negative once past it)."""
+        return self.deadline - self.now()
+
+    def expired(self) -> bool:
+        """Whether the deadline has passed."""
+        return self.now() >= self.deadline
+
 
 @dataclasses.dataclass(frozen=True)
 class TaskWaypoint:
@@ -88,13 +146,15 @@ class PlanningProblem:
         held: the can carried in the gripper, part of the robot for collision, or None.
         gripper_opening_m: finger opening during the motion.
         removed_can_ids: cans already recycled (not on the plate any more).
-        time_limit_s: the planner's budget.
+        time_limit_s: the planner's budget, s on `budget_clock`.
         seed: the trial's seed (derived from the run seed and the trial's identity).
         pre_status: set when the problem cannot be posed (IK_FAILED); planners are not run.
         warm_start: an optional joint path (N, 7) a planner may start from (the path being
             executed when it replans toward a moved goal); its ends need not be q_start and
             q_goal (`warm_start_guess` maps it onto them). A planner that ignores it is unchanged;
             it is no part of the problem's identity.
+        budget_clock: the clock `time_limit_s` is measured on: "wall" (elapsed time) or "cpu"
+            (the planner's process's CPU time; `Budget`).
     """
 
     kind: str
@@ -111,6 +171,7 @@ class PlanningProblem:
     seed: int
     pre_status: PlanStatus | None = None
     warm_start: np.ndarray | None = None
+    budget_clock: str = "wall"
 
     @property
     def name(self) -> str:
@@ -217,7 +278,8 @@ class PlannerBase:
     1. takes the problem's python-fcl world (built outside the clock by the orchestrator, as
        `prepare` builds what else depends on the world alone);
     2. checks the endpoints (`check_endpoints`): a bad one is reported at once, with its cause;
-    3. calls `solve(problem, world, deadline)` with the deadline of the problem's budget;
+    3. calls `solve(problem, world, budget)` with the problem's budget (`Budget`: its
+       `time_limit_s` on its `budget_clock`, started now);
     4. fills in and checks the stats every planner shares (`shared_stats`: `reason_code`,
        `solver`, `reason`).
 
@@ -252,21 +314,21 @@ class PlannerBase:
     def plan(self, problem: PlanningProblem) -> PlanResult:
         """The shared steps around `solve` (see the class docstring); never raises for a problem
         it cannot solve."""
-        import time
-
         from planners.worlds import planning_world
 
         world = planning_world(problem)
         bad = check_endpoints(problem, world)
         if bad is not None:
             return shared_stats(bad, solver=self.solver)
-        result = self.solve(problem, world, time.perf_counter() + float(problem.time_limit_s))
+        budget = Budget.starting_now(float(problem.time_limit_s), clock=problem.budget_clock)
+        result = self.solve(problem, world, budget)
         return shared_stats(result, solver=self.solver)
 
-    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
+    def solve(self, problem: PlanningProblem, world, budget: Budget) -> PlanResult:
         """The algorithm: a path from `problem.q_start` to `problem.q_goal` (both checked valid),
-        within `deadline` (`time.perf_counter()` seconds). Failures name their cause in
-        `stats["reason_code"]` (`FailureReason`)."""
+        within `budget` (its deadline checks read `budget.expired()` / `budget.left_s()`, so that
+        they run on the run's budget clock). Failures name their cause in `stats["reason_code"]`
+        (`FailureReason`)."""
         raise NotImplementedError
 
 

@@ -36,7 +36,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
+from planners.base import Budget, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
 from planners.gcs_regions import RegionBuilder, RegionOptions, RegionSet, check_with_world, problem_hash, regions_for
 from planners.gcs_solve import SOLVERS, checked_path, connect_ends
 from planners.worlds import remember
@@ -130,7 +130,7 @@ class GcsPlanner(PlannerBase):
         if self.config.online_iris and self.config.seeding != "problem" and problem.world_key() not in self._online:
             remember(self._online, problem.world_key(), RegionBuilder(problem, ONLINE_OPTIONS), max_items=4)
 
-    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
+    def solve(self, problem: PlanningProblem, world, budget: Budget) -> PlanResult:
         cfg = self.config
         key = self._key(problem)
         if key not in self._regions:  # called without prepare (e.g. directly): regions are still offline cost
@@ -159,18 +159,18 @@ class GcsPlanner(PlannerBase):
         # Online (planning time): join start and goal to the world's regions by free straight
         # segments where no region holds them.
         joined = connect_ends(A, b, edges, q_start, q_goal, world=world, resolution_rad=cfg.check_resolution_rad,
-                              deadline=deadline)
+                              budget=budget)
         seeds = list(rs.seeds)
         stats["online_regions"] = 0
         builder = self._online.get(problem.world_key()) if cfg.online_iris else None
         for name, q in (("start", q_start), ("goal", q_goal)):
-            if joined[f"{name}_join"] != "none" or builder is None or time.perf_counter() >= deadline:
+            if joined[f"{name}_join"] != "none" or builder is None or budget.expired():
                 continue
             if _grow_online(A, b, edges, seeds, q, builder=builder, world=world):
                 stats["online_regions"] += 1
         if stats["online_regions"]:
             joined = connect_ends(A, b, edges, q_start, q_goal, world=world,
-                                  resolution_rad=cfg.check_resolution_rad, deadline=deadline)
+                                  resolution_rad=cfg.check_resolution_rad, budget=budget)
         gcs_ends = joined.pop("ends")
         stats["regions_connected"] = joined.pop("connected")
         stats.update(joined)
@@ -187,7 +187,7 @@ class GcsPlanner(PlannerBase):
             A, b, edges, seeds, gcs_ends[0], gcs_ends[1], world=world, order=cfg.order,
             max_rounded_paths=cfg.max_rounded_paths, solver=cfg.solver, seed=problem.seed,
             max_repairs=cfg.max_repairs, check_resolution_rad=cfg.check_resolution_rad,
-            sample_step_rad=cfg.sample_step_rad, deadline=deadline)
+            sample_step_rad=cfg.sample_step_rad, budget=budget)
         if path is not None:  # the joining segments, checked free above
             path = np.vstack([[q_start]] * (stats["start_join"] == "segment") + [path]
                              + [[q_goal]] * (stats["goal_join"] == "segment"))

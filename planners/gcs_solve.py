@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 
+from planners.base import Budget
 from planners.gcs_sets import RegionSet, linked, reachable
 
 SOLVERS = ("clarabel", "scs")
@@ -122,7 +123,7 @@ def usable_regions(A: list, b: list) -> list[int]:
 
 
 def join_endpoint(A: list, b: list, q: np.ndarray, *, world, resolution_rad: float = 0.01,
-                  inset_rad: float = 0.02, deadline: float = float("inf"),
+                  inset_rad: float = 0.02, budget: Budget | None = None,
                   among: set[int] | None = None) -> tuple[list[int], np.ndarray | None, int]:
     """Join a configuration to the regions {A_i q <= b_i} online (planning time).
 
@@ -159,7 +160,7 @@ def join_endpoint(A: list, b: list, q: np.ndarray, *, world, resolution_rad: flo
     near.sort(key=lambda t: t[0])
     tried = 0
     for _, i, p, poly in near:
-        if time.perf_counter() >= deadline:
+        if budget is not None and budget.expired():
             break
         tried += 1
         c = poly.ChebyshevCenter()
@@ -172,7 +173,7 @@ def join_endpoint(A: list, b: list, q: np.ndarray, *, world, resolution_rad: flo
 
 
 def connect_ends(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.ndarray, *, world,
-                 resolution_rad: float = 0.01, deadline: float = float("inf")) -> dict:
+                 resolution_rad: float = 0.01, budget: Budget | None = None) -> dict:
     """Join start and goal to the regions (`join_endpoint`) and say whether the region graph
     links them.
 
@@ -184,7 +185,7 @@ def connect_ends(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.
     out: dict = {"ends": []}
     held = []
     for name, q in (("start", q_start), ("goal", q_goal)):
-        regions, p, tried = join_endpoint(A, b, q, world=world, resolution_rad=resolution_rad, deadline=deadline)
+        regions, p, tried = join_endpoint(A, b, q, world=world, resolution_rad=resolution_rad, budget=budget)
         out[f"{name}_join"] = "inside" if regions and p is None else ("segment" if regions else "none")
         out[f"{name}_join_tried"] = tried
         out["ends"].append(np.asarray(q if p is None else p, float))
@@ -196,7 +197,7 @@ def connect_ends(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.
         for k, (name, q) in enumerate((("start", q_start), ("goal", q_goal))):
             other = reachable(edges, held[1 - k])
             regions, p, tried = join_endpoint(A, b, q, world=world, resolution_rad=resolution_rad,
-                                              deadline=deadline, among=other)
+                                              budget=budget, among=other)
             out[f"{name}_join_tried"] += tried
             if regions:
                 out[f"{name}_join"] = "segment"
@@ -278,15 +279,16 @@ def solve_gcs(A: list, b: list, edges: list, q_start: np.ndarray, q_goal: np.nda
 def checked_path(A: list, b: list, edges: list, seeds: list, q_start: np.ndarray, q_goal: np.ndarray, *, world,
                  order: int = 1, max_rounded_paths: int = 5, solver: str = "clarabel", seed: int = 0,
                  max_repairs: int = 5, check_resolution_rad: float = 0.01, sample_step_rad: float = 0.02,
-                 deadline: float = float("inf")) -> tuple[np.ndarray | None, dict]:
+                 budget: Budget | None = None) -> tuple[np.ndarray | None, dict]:
     """Solve, check the path with the python-fcl world as the validator does, and where it collides
     cut the colliding configuration off the regions holding it (A, b, edges are changed in place)
-    and solve again, up to `max_repairs` times or the deadline (time.perf_counter()).
+    and solve again, up to `max_repairs` times or the end of `budget` (None: no limit; a GCS
+    solve itself runs to its end: the budget is checked between solves).
 
     Returns:
         (path (N, 7) or None, stats: solver_status, cost, repairs, cuts, first_solve_s and
         gcs_solve_s (the first and all GCS solves, s), reason when None, and timed_out when the
-        deadline stopped the repairs).
+        budget stopped the repairs).
     """
     lower, upper = world.robot.lower_rad, world.robot.upper_rad
     stats: dict = {"repairs": 0, "cuts": 0}
@@ -316,7 +318,7 @@ def checked_path(A: list, b: list, edges: list, seeds: list, q_start: np.ndarray
         k = world.first_collision(dense)
         if k < 0:
             return path, stats
-        if time.perf_counter() >= deadline:
+        if budget is not None and budget.expired():
             stats["reason"] = "the planning budget ran out while repairing a colliding path"
             stats["timed_out"] = True
             return None, stats

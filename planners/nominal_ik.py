@@ -50,7 +50,7 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import PiecewisePose
 
 from planners.drake_queries import EvaluationCounter, query_stats
-from planners.base import PROBLEM_KINDS, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
+from planners.base import PROBLEM_KINDS, Budget, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
 from scenes.errors import SuiteError
 from planners.worlds import drake_plan_scene, remember
 
@@ -213,17 +213,17 @@ class NominalIkPlanner(PlannerBase):
         return (kind in _NEAR_KINDS or (kind == "approach" and t >= t1 - w - 1e-9)
                 or (kind == "lift" and t <= t0 + w + 1e-9))
 
-    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
+    def solve(self, problem: PlanningProblem, world, budget: Budget) -> PlanResult:
         """`_plan`, with its Drake distance queries counted and timed (`planners.drake_queries`)."""
         program = self._program(problem)
         calls0 = program.evaluations.calls
         program.evaluations.restart()
-        result = self._plan(problem, world)
+        result = self._plan(problem, world, budget)
         queries = program.evaluations.calls - calls0  # the iterates are q itself, one binding
         result.stats.update(query_stats(queries, program.distance[False], program.evaluations.sample))
         return result
 
-    def _plan(self, problem: PlanningProblem, world) -> PlanResult:
+    def _plan(self, problem: PlanningProblem, world, budget: Budget) -> PlanResult:
         cfg = self.config
         t_start = time.perf_counter()
         wp_t = np.array([w.t for w in problem.waypoints], float)
@@ -241,7 +241,6 @@ class NominalIkPlanner(PlannerBase):
         counts = {"ik_solves": 0, "retries": 0, "refinements": 0, "cost": 0.0}
         stats: dict = {"solver": "SNOPT", "knot_dt_tu": cfg.knot_dt_tu}
         rng = np.random.default_rng(_problem_seed(problem))
-        deadline = t_start + float(problem.time_limit_s)
 
         def solve_knot(before: tuple | None, t_a: float, q_a: np.ndarray,
                        t_b: float) -> tuple[bool, np.ndarray | None, str]:
@@ -263,7 +262,7 @@ class NominalIkPlanner(PlannerBase):
                 guesses.append(q_a + (q_a - before[1]) * (t_b - t_a) / (t_a - before[0]))
             ok, q, status = False, None, ""
             for i in range(1 + cfg.knot_retries):
-                if i > 0 and time.perf_counter() > deadline:
+                if i > 0 and budget.expired():
                     break
                 guess = guesses[i] if i < len(guesses) else q_lo + rng.random(7) * (q_hi - q_lo)
                 ok, q, status, cost = prog.solve(q_guess=guess, **knot)
@@ -281,7 +280,7 @@ class NominalIkPlanner(PlannerBase):
             stats["solver_status"] = status
             if ok and world.motion_free(q_a, q_b, resolution_rad=cfg.segment_check_rad):
                 return [(t_b, q_b)]
-            if time.perf_counter() > deadline:
+            if budget.expired():
                 return _OUT_OF_TIME
             if depth >= cfg.max_refinements:
                 return f"IK failed ({status})" if not ok else "step between knots collides"

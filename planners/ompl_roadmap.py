@@ -40,7 +40,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, snapped_to_ends
+from planners.base import Budget, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, snapped_to_ends
 from planners.worlds import remember
 from scenes.errors import SuiteError
 
@@ -265,7 +265,7 @@ class PRMRoadmapPlanner(PlannerBase):
             return
         remember(self._roadmaps, key, roadmap_for(problem, self.config), max_items=2)
 
-    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
+    def solve(self, problem: PlanningProblem, world, budget: Budget) -> PlanResult:
         from scipy.sparse.csgraph import dijkstra
 
         cfg = self.config
@@ -289,7 +289,7 @@ class PRMRoadmapPlanner(PlannerBase):
             links = [int(i) for i in near if world.motion_free(q, rm.milestones[i], resolution_rad=cfg.resolution_rad)]
             extra += [(n + k, i) for i in links]
             joined.append(len(links))
-            if time.perf_counter() >= deadline:
+            if budget.expired():
                 stats.update(query_s=time.perf_counter() - t0, reason_code=FailureReason.BUDGET_SPENT.value)
                 return PlanResult(PlanStatus.TIMEOUT, None, stats)
         stats["start_links"], stats["goal_links"] = joined
@@ -310,9 +310,9 @@ class PRMRoadmapPlanner(PlannerBase):
         stats["length_before_rad"] = float(np.sum(np.linalg.norm(np.diff(Q, axis=0), axis=1)))
         stats["query_s"] = time.perf_counter() - t0
         t_simp = time.perf_counter()
-        left = min(cfg.simplify_time_s, deadline - t_simp)
+        left = min(cfg.simplify_time_s, budget.left_s())
         if cfg.simplify_time_s > 0 and left > 0:
-            Q = _simplified(Q, world, cfg.resolution_rad, left)
+            Q = _simplified(Q, world, cfg.resolution_rad, left, clock=budget.clock)
         stats["simplify_time_s"] = time.perf_counter() - t_simp
         bad = world.path_free(Q, resolution_rad=cfg.validate_resolution_rad)
         stats["collision_checks"] = world.checks - checks0
@@ -324,13 +324,13 @@ class PRMRoadmapPlanner(PlannerBase):
         return snapped_to_ends(problem, np.asarray(Q, float), stats)
 
 
-def _simplified(Q: np.ndarray, world, resolution_rad: float, budget_s: float) -> np.ndarray:
+def _simplified(Q: np.ndarray, world, resolution_rad: float, budget_s: float, *, clock: str = "wall") -> np.ndarray:
     """OMPL's PathSimplifier.simplify (shortcuts, smoothing, vertex reduction) on path Q in the
-    world, within `budget_s`."""
-    from ompl import base as ob
+    world, within `budget_s` on budget clock `clock`."""
     from ompl import geometric as og
 
     from planners.ompl_adapter import DOF, OmplProblem, drop_collinear, path_array
+    from planners.ompl_budget import termination
 
     op = OmplProblem(world, Q[0], Q[-1], resolution_rad=resolution_rad, optimizing=False)
     path = og.PathGeometric(op.si)
@@ -342,7 +342,7 @@ def _simplified(Q: np.ndarray, world, resolution_rad: float, budget_s: float) ->
             states.append(s)
             path.append(s)
         simplifier = og.PathSimplifier(op.si)
-        simplifier.simplify(path, ob.timedPlannerTerminationCondition(budget_s))
+        simplifier.simplify(path, termination(clock, budget_s))
         out = drop_collinear(path_array(path))
     finally:
         del path, states

@@ -23,7 +23,16 @@ import numpy as np
 from ompl import base as ob
 from ompl import geometric as og
 
-from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, snapped_to_ends
+from planners.base import (
+    Budget,
+    FailureReason,
+    PlannerBase,
+    PlanningProblem,
+    PlanResult,
+    PlanStatus,
+    clock_now,
+    snapped_to_ends,
+)
 from planners.ompl_adapter import (
     RESOLUTION_NORMS,
     OmplProblem,
@@ -33,6 +42,7 @@ from planners.ompl_adapter import (
     set_ompl_log_level,
     trial_seed,
 )
+from planners.ompl_budget import termination
 from scenes.errors import SuiteError
 
 log = logging.getLogger(__name__)
@@ -212,9 +222,12 @@ class _OmplPlanner(PlannerBase):
     def _planner_stats(self, planner) -> dict[str, Any]:
         return {}
 
-    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
+    #: the budget clock of the solve in progress (`solve` sets it; `_attempt` reads it)
+    _clock: str = "wall"
+
+    def solve(self, problem: PlanningProblem, world, budget: Budget) -> PlanResult:
         """Plan a collision-free joint path from `problem.q_start` to `problem.q_goal` (both
-        checked valid by `PlannerBase.plan`).
+        checked valid by `PlannerBase.plan`), within `budget` (on its clock).
 
         Returns:
             SUCCESS with the (N, 7) path (rad) from q_start to q_goal exactly; TIMEOUT if the
@@ -223,15 +236,16 @@ class _OmplPlanner(PlannerBase):
         cfg = self.config
         set_ompl_log_level(cfg.verbose)
         checks0, query0 = world.checks, world.query_s
-        t0 = time.perf_counter()
-        budget_s = cfg.time_limit_s if cfg.time_limit_s is not None else deadline - t0
+        self._clock = budget.clock
+        t0 = budget.now()
+        budget_s = cfg.time_limit_s if cfg.time_limit_s is not None else budget.deadline - t0
         seed = trial_seed(problem)
         result = self._attempt(problem, world, resolution_rad=cfg.resolution_rad, budget_s=budget_s, seed=seed)
         fine = cfg.validate_resolution_rad
         if result.status is PlanStatus.SUCCESS and fine is not None and fine < cfg.resolution_rad:
             bad_at = world.path_free(result.path, resolution_rad=fine)
             if bad_at >= 0:
-                remaining_s = budget_s - (time.perf_counter() - t0)
+                remaining_s = budget_s - (budget.now() - t0)
                 log.debug("%s %s: path collides at %.3f rad resolution; replanning at that resolution in %.3f s",
                          self.name, problem.name, fine, remaining_s)
                 if remaining_s > 0:
@@ -254,15 +268,17 @@ class _OmplPlanner(PlannerBase):
         return PlanResult(result.status, path, stats)
 
     @staticmethod
-    def _solve_in_slices(op, budget_s: float, progress: list, t_solve: float):
+    def _solve_in_slices(op, budget_s: float, progress: list, t_solve: float, clock: str = "wall"):
         """Solve for the budget in PROGRESS_SLICES slices (an OMPL planner's solve() carries on from
         its tree or roadmap when called again), recording (time in the solve, best cost or None
         before the first solution) after each slice: OMPL's planner progress properties, which its
-        Python bindings cannot return, sampled at a fixed period as OMPL's Benchmark samples them."""
-        deadline = t_solve + budget_s
+        Python bindings cannot return, sampled at a fixed period as OMPL's Benchmark samples them.
+        The budget is on `clock`; each slice is wall-timed and no longer than what is left of it
+        (`planners.ompl_budget`: PRM checks its condition from a thread of its own)."""
+        deadline = clock_now(clock) + budget_s
         status = None
         while True:
-            left = deadline - time.perf_counter()
+            left = deadline - clock_now(clock)
             if left <= 0 and status is not None:
                 return status
             slice_s = max(min(max(budget_s / PROGRESS_SLICES, MIN_SLICE_S), left), 1e-4)
@@ -294,17 +310,18 @@ class _OmplPlanner(PlannerBase):
         path = simplifier = None
         progress: list[list] = []  # optimizing planners: [time in the solve, best cost or None] points
         try:
-            t_solve = time.perf_counter()
+            t_solve, c_solve = time.perf_counter(), clock_now(self._clock)
             if self.optimizing and self.resumable:
-                status = self._solve_in_slices(op, solve_budget_s, progress, t_solve)
+                status = self._solve_in_slices(op, solve_budget_s, progress, t_solve, self._clock)
                 stats["progress"] = progress
             elif self.optimizing:  # one solve: its progress is the end point only
-                status = op.planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
+                status = op.planner.solve(termination(self._clock, solve_budget_s))
                 progress.append(_progress_point(op, t_solve))
                 stats["progress"] = progress
             else:
-                status = op.planner.solve(ob.timedPlannerTerminationCondition(solve_budget_s))
+                status = op.planner.solve(termination(self._clock, solve_budget_s))
             solve_time_s = time.perf_counter() - t_solve
+            solve_spent_s = clock_now(self._clock) - c_solve  # on the budget's clock
             if not self.optimizing:
                 # the search's check density: the samples of the motions that passed, one per tree
                 # edge (RRT-Connect adds an edge for each), before the simplifier checks its own
@@ -323,7 +340,7 @@ class _OmplPlanner(PlannerBase):
                 stats["graph_vertices"] = data.numVertices()
                 del data
             if code != T.EXACT_SOLUTION or not op.pdef.hasExactSolution():
-                out_of_time = solve_time_s >= solve_budget_s * 0.999
+                out_of_time = solve_spent_s >= solve_budget_s * 0.999
                 if code in (T.TIMEOUT, T.APPROXIMATE_SOLUTION) and out_of_time:
                     return PlanResult(PlanStatus.TIMEOUT, None, stats)
                 if code == T.CRASH:
@@ -335,14 +352,14 @@ class _OmplPlanner(PlannerBase):
             stats["waypoints_before"] = path.getStateCount()
             if op.objective is not None:
                 stats["best_cost"] = path.cost(op.objective).value()
-            t_simp = time.perf_counter()
+            t_simp, c_simp = time.perf_counter(), clock_now(self._clock)
             if simplify_budget_s > 0:
                 simplifier = og.PathSimplifier(op.si)
                 if cfg.simplifier in ("rope", "rope+full"):
                     simplifier.ropeShortcutPath(path, cfg.rope_delta_rad)
-                left_s = simplify_budget_s - (time.perf_counter() - t_simp)
+                left_s = simplify_budget_s - (clock_now(self._clock) - c_simp)
                 if cfg.simplifier in ("full", "rope+full") and left_s > 0:
-                    simplifier.simplify(path, ob.timedPlannerTerminationCondition(left_s))
+                    simplifier.simplify(path, termination(self._clock, left_s))
             stats["simplify_time_s"] = time.perf_counter() - t_simp
             stats["length_after_rad"] = path.length()
             stats["motion_checks"] = op.validator.motions

@@ -36,7 +36,7 @@ import numpy as np
 import roboplan.core as rpc
 import roboplan.rrt as rpr
 
-from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, snapped_to_ends
+from planners.base import Budget, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, snapped_to_ends
 from planners.ompl_adapter import trial_seed
 from planners.roboplan_scene import RoboplanWorld, build_roboplan_world
 from planners.worlds import collision_world, remember
@@ -166,19 +166,21 @@ class RoboplanRRTPlanner(PlannerBase):
             fast_return=True,
         )
 
-    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
+    def solve(self, problem: PlanningProblem, world, budget: Budget) -> PlanResult:
         """Plan with roboplan's RRT-Connect from `problem.q_start` to `problem.q_goal` (both
         checked valid by the python-fcl world in `PlannerBase.plan`, as for every planner).
+        roboplan times its search itself, on the wall clock (`max_planning_time`, a steady clock
+        in its C++ loop): with a CPU budget it is given the CPU time left as wall time.
 
         Returns:
             SUCCESS with the (N, 7) path (rad); TIMEOUT when roboplan runs out of time;
             NO_SOLUTION when it hits its node cap; ERROR for any other failure roboplan reports.
         """
         cfg = self.config
-        t0 = time.perf_counter()
+        t0 = budget.now()
         rw, check_s = roboplan_world(problem)
-        budget_s = cfg.time_limit_s if cfg.time_limit_s is not None else deadline - t0
-        search_s = budget_s - (time.perf_counter() - t0) - (cfg.shortcut_reserve_s if cfg.shortcut else 0.0)
+        budget_s = cfg.time_limit_s if cfg.time_limit_s is not None else budget.deadline - t0
+        search_s = budget_s - (budget.now() - t0) - (cfg.shortcut_reserve_s if cfg.shortcut else 0.0)
         seed = trial_seed(problem)
         stats: dict[str, Any] = {"solver": self.solver, "seed": seed, "range_rad": cfg.range_rad,
                                  "resolution_rad": cfg.collision_check_step_rad, "resolution_norm": "l2",

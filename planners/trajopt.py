@@ -33,7 +33,7 @@ from pydrake.planning import KinematicTrajectoryOptimization
 from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import BsplineTrajectory
 
-from planners.base import FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, warm_start_guess
+from planners.base import Budget, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus, warm_start_guess
 from planners.drake_queries import EvaluationCounter, query_stats
 from scenes.errors import SuiteError
 from planners.worlds import drake_plan_scene, remember
@@ -234,7 +234,7 @@ class TrajoptPlanner(PlannerBase):
             at.append(traj.value(samples[k % len(samples)]).ravel())
         return query_stats(queries, distance, np.array(at), num_derivatives=self.config.spline_order * cps.shape[0])
 
-    def solve(self, problem: PlanningProblem, world, deadline: float) -> PlanResult:
+    def solve(self, problem: PlanningProblem, world, budget: Budget) -> PlanResult:
         cfg = self.config
         t0 = time.perf_counter()
         ds, _, plant_context = self._plant(problem)
@@ -271,7 +271,7 @@ class TrajoptPlanner(PlannerBase):
 
         def stop_at_deadline(x) -> None:  # evaluated with every cost and constraint evaluation
             evaluations(x)
-            if time.perf_counter() >= deadline:
+            if budget.expired():
                 out_of_time.append(True)
                 raise _OutOfTime
 
@@ -322,7 +322,7 @@ class TrajoptPlanner(PlannerBase):
                 stats.update(self._queries(trajopt, prog, distance, evaluations, samples, sum(queries)))
                 return PlanResult(PlanStatus.SUCCESS, path, stats)
             reason = "path still collides after the last re-solve"
-            if time.perf_counter() >= deadline:
+            if budget.expired():
                 break
             new = _stretches(s_bad, cfg.samples_per_hit, gap=2.0 / cfg.output_samples)
             for s in new:
@@ -330,7 +330,7 @@ class TrajoptPlanner(PlannerBase):
             samples += new
         stats.update(constraint_samples=len(samples), solve_time_s=time.perf_counter() - t0)
         stats.update(self._queries(trajopt, prog, distance, evaluations, samples, sum(queries)))
-        if time.perf_counter() >= deadline:
+        if budget.expired():
             stats["reason"] = "time limit reached"
             stats["reason_code"] = FailureReason.BUDGET_SPENT.value
             return PlanResult(PlanStatus.TIMEOUT, None, stats)
