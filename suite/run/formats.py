@@ -11,10 +11,26 @@ from typing import Any
 
 from scenes.errors import SuiteError
 
-#: The version of the trial records in trials.jsonl this suite writes and reads.
-RECORD_FORMAT_VERSION = 1
-#: The version of a run's manifest.json this suite writes and reads.
-MANIFEST_FORMAT_VERSION = 1
+#: The newest version of the trial records in trials.jsonl this suite writes and reads.
+#: 2: a record's budget may be CPU time (`budget_clock`: "cpu"), and then its TIMEOUT (a late
+#: success included) was judged on its `planning_cpu_time_s`, not its wall time.
+RECORD_FORMAT_VERSION = 2
+#: The newest version of a run's manifest.json this suite writes and reads.
+#: 2: the run's `config.budget_clock` may be "cpu" (a suite that does not know it would resume the
+#: run on the wall clock).
+MANIFEST_FORMAT_VERSION = 2
+
+
+def record_format_version(*, budget_clock: str) -> int:
+    """The version a new record is written with: the oldest that reads it correctly. A wall-clock
+    record is version 1 (its `planning_cpu_time_s`, `budget_clock` and `contention` are additions a
+    version-1 reader may ignore); a CPU-clock one is version 2."""
+    return 1 if budget_clock == "wall" else 2
+
+
+def manifest_format_version(*, budget_clock: str) -> int:
+    """The version a new run manifest is written with (as `record_format_version`)."""
+    return 1 if budget_clock == "wall" else 2
 
 
 def format_version(data: dict[str, Any]) -> int:

@@ -69,6 +69,10 @@ class CompareConfig:
     #: what the planners' python-fcl checks run in: the compiled kernels, or the numpy reference
     #: (the same answers; `planners.worlds.planning_world`)
     checker: Literal["compiled", "numpy"] = "compiled"
+    #: the clock the budgets are measured on: "wall" (elapsed time) or "cpu" (the CPU time of the
+    #: trial's worker process, which other processes on the machine cannot take; docs/timing.md
+    #: says which planners honour it)
+    budget_clock: Literal["wall", "cpu"] = "wall"
 
 
 def worker_init() -> None:
@@ -145,6 +149,8 @@ def prepare_trials(config: CompareConfig, *, progress=None) -> list[TrialSpec]:
         configs[name] = config_dict(make_config(cls, config.planner_configs.get(name)))
     trials = []
     for problem, meta in (_dataset_problems(config) if config.dataset else _generated_problems(config, progress)):
+        if config.budget_clock != problem.budget_clock:
+            problem = problem.with_(budget_clock=config.budget_clock)
         for budget in config.budgets or (None,):
             at = problem if budget is None else problem.with_(time_limit_s=float(budget))
             for name in config.planners:
@@ -274,10 +280,10 @@ def write_manifest(out: Path, config: CompareConfig, *, argv: list[str]) -> None
         filters = dataset_filters(config.dataset)
         if filters:
             dataset["filters"] = {field: sorted(values) for field, values in filters.items()}
-    from suite.run.formats import MANIFEST_FORMAT_VERSION
+    from suite.run.formats import manifest_format_version
 
     manifest = {
-        "format_version": MANIFEST_FORMAT_VERSION,
+        "format_version": manifest_format_version(budget_clock=config.budget_clock),
         "status": "running",
         "command": " ".join(["python -m suite"] + argv),
         "config": dataclasses.asdict(config),

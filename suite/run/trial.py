@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus
+from suite.run.contention import ContentionProbe
 from suite.scoring.validate import certify_path, over_limit, structure_reason, validate_path
 
 log = logging.getLogger(__name__)
@@ -63,20 +64,22 @@ def derive_seed(*parts: Any) -> int:
 
 
 def trial_id(*, problem: PlanningProblem, planner: str, planner_config: dict) -> str:
-    """Hash of (scene spec and cans, seed, problem, planner and its config)."""
-    blob = json.dumps(
-        {
-            "scene": problem.scene.key(),
-            "scene_seed": problem.scene.seed,
-            "can": problem.can_id,
-            "problem": problem.kind,
-            "seed": problem.seed,
-            "time_limit_s": problem.time_limit_s,
-            "planner": planner,
-            "config": planner_config,
-        },
-        sort_keys=True,
-    )
+    """Hash of (scene spec and cans, seed, problem, budget and its clock, planner and its config).
+    The wall clock, the clock of every run before budgets had one, is left out, so those trials
+    keep their ids."""
+    fields = {
+        "scene": problem.scene.key(),
+        "scene_seed": problem.scene.seed,
+        "can": problem.can_id,
+        "problem": problem.kind,
+        "seed": problem.seed,
+        "time_limit_s": problem.time_limit_s,
+        "planner": planner,
+        "config": planner_config,
+    }
+    if problem.budget_clock != "wall":
+        fields["budget_clock"] = problem.budget_clock
+    blob = json.dumps(fields, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
 
@@ -113,11 +116,11 @@ def run_problem(problem: PlanningProblem, *, planner: str, planner_config: dict[
 
 def trial_record(spec: TrialSpec) -> dict[str, Any]:
     """The fields of a trial's record that describe what was asked (before any planning)."""
-    from suite.run.formats import RECORD_FORMAT_VERSION
+    from suite.run.formats import record_format_version
 
     problem = spec.problem
     return {
-        "format_version": RECORD_FORMAT_VERSION,
+        "format_version": record_format_version(budget_clock=problem.budget_clock),
         "trial_id": spec.trial_id,
         "planner": spec.planner,
         "planner_config": spec.planner_config,
@@ -129,6 +132,7 @@ def trial_record(spec: TrialSpec) -> dict[str, Any]:
         "held": problem.held is not None,
         "seed": problem.seed,
         "time_limit_s": problem.time_limit_s,
+        "budget_clock": problem.budget_clock,
         "q_start": _list(problem.q_start),
         "q_goal": _list(problem.q_goal),
         **spec.meta,
@@ -156,10 +160,11 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
 def failed_record(spec: TrialSpec, *, status: str, wall_time_s: float, stats: dict[str, Any],
                   reason_code: str) -> dict[str, Any]:
     """The record of a trial that ended without a plan to judge (out of memory, a crashed or
-    killed worker): `trial_record`'s fields, then the status, its cause and the wall time."""
+    killed worker): `trial_record`'s fields, then the status, its cause and the wall time (its CPU
+    time is not known)."""
     record = trial_record(spec)
-    record.update(status=status, planning_time_s=wall_time_s, path=None, metrics={}, stats=stats,
-                  reason_code=reason_code)
+    record.update(status=status, planning_time_s=wall_time_s, planning_cpu_time_s=None, path=None, metrics={},
+                  stats=stats, reason_code=reason_code)
     return record
 
 
@@ -183,7 +188,10 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
         result = _error_result(spec, exc)
     record["setup_time_s"] = time.perf_counter() - t_setup
     checks0, query0, fcl0 = checks.checks, checks.query_s, checks.fcl_calls
-    t0 = time.perf_counter()
+    probe = ContentionProbe.start()
+    # CPU time of the whole process, not of this thread: OMPL's PRM and Drake's GCS plan in threads
+    # of their own, and a worker process runs one trial at a time (`planners.base.CLOCKS`).
+    t0, c0 = time.perf_counter(), time.process_time()
     if result is None:
         try:
             result = planner.plan(problem)
@@ -192,12 +200,15 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
         except Exception as exc:
             result = _error_result(spec, exc)
     planning_time_s = time.perf_counter() - t0
+    planning_cpu_time_s = time.process_time() - c0
+    record["contention"] = probe.stop(wall_s=planning_time_s, cpu_s=planning_cpu_time_s)
     fcl = (checks.checks - checks0, checks.query_s - query0)
     record["checker"] = checks.engine
     record["fcl_collide_calls"] = checks.fcl_calls - fcl0  # the pairs nothing cheaper decided, while planning
     record["warm"] = spec.planner in _PLANNED  # False: this worker's first trial of the planner
     _PLANNED.add(spec.planner)
-    record = judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s)
+    record = judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s,
+                          planning_cpu_time_s=planning_cpu_time_s)
     attribution = attribute(record["stats"], planning_time_s, fcl)
     if attribution is not None:
         record["attribution"] = attribution
@@ -248,15 +259,16 @@ LATE_GRACE_S = 0.01
 
 
 def late_after_s(time_limit_s: float) -> float:
-    """The planning time after which a success counts as a timeout (s)."""
+    """The planning time after which a success counts as a timeout (s, on the budget's clock)."""
     return time_limit_s * (1 + LATE_GRACE_SHARE) + LATE_GRACE_S
 
 
 def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: PlanResult,
-                 planning_time_s: float) -> dict[str, Any]:
+                 planning_time_s: float, planning_cpu_time_s: float | None = None) -> dict[str, Any]:
     """Complete a trial record from a planner's result: a claimed solution is validated, timed
     with TOPP-RA and scored, identically for the suite's planners and imported external ones. A
-    claimed solution returned after the budget (`late_after_s`) is a TIMEOUT (`stats.late_by_s`).
+    claimed solution returned after the budget (`late_after_s`, on the problem's budget clock: the
+    planning wall time, or with a CPU budget the planning CPU time) is a TIMEOUT (`stats.late_by_s`).
 
     The path is judged as it is stored (rounded to 1e-10 rad), so that a stored path re-scored
     or re-imported gives exactly the record's metrics.
@@ -267,9 +279,11 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
         world: the problem's python-fcl collision world.
         result: what the planner returned (SUCCESS with a path is a claimed solution).
         planning_time_s: the planner's wall time, s.
+        planning_cpu_time_s: its process's CPU time, s (None: not measured; a CPU budget is then
+            judged on the wall time, the larger of the two for a single-threaded planner).
 
     Returns:
-        The record, with status, planning_time_s, path, metrics, certification (the exact
+        The record, with status, planning_time_s, planning_cpu_time_s, path, metrics, certification (the exact
         verdict of every claimed path that has the right shape, ends and limits; None otherwise)
         and stats.
     """
@@ -279,6 +293,8 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
     path = None if result.path is None else np.asarray(result.path, float).round(10)
     metrics: dict[str, float] = {}
     certification = None
+    on_cpu = problem.budget_clock == "cpu" and planning_cpu_time_s is not None
+    budget_time_s = planning_cpu_time_s if on_cpu else planning_time_s  # the late rule's clock is the budget's
     shaped = status == PlanStatus.SUCCESS and structure_reason(problem, path, world) is None
     limit = over_limit(path) if shaped else None
     if limit is not None:
@@ -294,14 +310,15 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
         if reason is not None:
             status = PlanStatus.INVALID_SOLUTION
             stats["invalid_reason"] = reason
-        elif planning_time_s > late_after_s(problem.time_limit_s):
+        elif budget_time_s > late_after_s(problem.time_limit_s):
             # A solve that cannot be interrupted (SNOPT, a GCS solve, OMPL between its checks) may
             # return a valid path after the budget: credited, it would measure the clock checks,
             # not the planner. It is neither timed nor scored.
             status = PlanStatus.TIMEOUT
-            stats["late_by_s"] = planning_time_s - problem.time_limit_s
-            stats["reason"] = (f"a valid path came {planning_time_s:.3g} s into a {problem.time_limit_s:g} s "
-                               "budget (it does not count)")
+            stats["late_by_s"] = budget_time_s - problem.time_limit_s
+            what = " of CPU time" if on_cpu else ""
+            stats["reason"] = (f"a valid path came {budget_time_s:.3g} s{what} into a {problem.time_limit_s:g} s"
+                               f"{' CPU' if on_cpu else ''} budget (it does not count)")
         else:
             from suite.scoring.metrics import record_metrics, score
             from suite.scoring.timing import time_parameterize
@@ -319,6 +336,7 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
     record.update(
         status=status.value,
         planning_time_s=planning_time_s,
+        planning_cpu_time_s=planning_cpu_time_s,
         path=None if path is None or status not in (PlanStatus.SUCCESS, PlanStatus.TIMING_FAILED)
         else path.tolist(),
         metrics=metrics,

@@ -30,11 +30,13 @@ def records(out: Path) -> list[dict]:
 
 
 def comparable(recs):
-    """Everything but wall-clock figures, keyed by trial id."""
+    """Everything but wall-clock and CPU-time figures and the machine's contention, keyed by trial id."""
     out = {}
     for r in recs:
         r = dict(r)
         r.pop("planning_time_s")
+        r.pop("planning_cpu_time_s", None)
+        r.pop("contention", None)
         r["metrics"] = {k: v for k, v in r["metrics"].items() if not k.endswith("time_s")}
         r["stats"] = {k: v for k, v in r["stats"].items() if not k.endswith("time_s") and k != "iterations"}
         out[r["trial_id"]] = r

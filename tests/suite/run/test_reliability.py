@@ -177,7 +177,7 @@ def test_newer_record_version_is_one_line_naming_both(tmp_path):
     path.write_text(json.dumps(rec) + "\n" + json.dumps({**rec, "trial_id": "y", "format_version": 7}) + "\n")
     for read in (read_trials, recorded_trial_ids):
         with pytest.raises(SuiteError, match=r"line 2: trial record format version 7 is newer than this suite "
-                                             r"reads \(up to version 1\)"):
+                                             r"reads \(up to version 2\)"):
             read(path)
     path.write_text(json.dumps(rec) + "\n")  # no version: read as version 1
     assert _ids(path) == ["x"] and recorded_trial_ids(path) == {"x"}
@@ -187,11 +187,11 @@ def test_newer_manifest_version_is_refused_by_resume_and_reports(tmp_path, capsy
     run = tmp_path / "run"
     run.mkdir()
     (run / TRIALS_FILE).write_text("")
-    (run / "manifest.json").write_text(json.dumps({"format_version": 2, "config": {}}))
-    with pytest.raises(SuiteError, match=r"run manifest format version 2 is newer .* \(up to version 1\)"):
+    (run / "manifest.json").write_text(json.dumps({"format_version": 3, "config": {}}))
+    with pytest.raises(SuiteError, match=r"run manifest format version 3 is newer .* \(up to version 2\)"):
         read_manifest(run)
     assert main(["compare", "--resume", "--out", str(run)]) == 2
-    assert "run manifest format version 2 is newer than this suite reads (up to version 1)" in _one_error_line(capsys)
+    assert "run manifest format version 3 is newer than this suite reads (up to version 2)" in _one_error_line(capsys)
     (run / "manifest.json").write_text(json.dumps({"config": {}}))  # an old manifest: read as version 1
     assert read_manifest(run) == {"config": {}}
 
