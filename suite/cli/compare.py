@@ -52,6 +52,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--budgets", type=budget_list, default=None, metavar="B1,B2,...",
                    help="run every planner at each of these planning budgets (seconds), e.g. 0.05,0.2,1,5: "
                         "success and length against budget (replaces --time-limit-s)")
+    p.add_argument("--budget-clock", default=None, metavar="wall|cpu",
+                   help=f"the clock the planning budgets run on: wall (elapsed time) or cpu (the CPU time of the "
+                        f"trial's worker process: other processes on the machine cannot spend it; the planners that "
+                        f"cannot honour it are named in docs/timing.md) (default {d.budget_clock})")
     p.add_argument("--jobs", type=positive_int, default=None,
                    help=f"worker processes, at most one per pending trial (default {d.jobs})")
     p.add_argument("--memory-limit-mb", type=positive_int, default=None,
@@ -166,6 +170,7 @@ def _config_file(path: str) -> dict:
 
 def resolve_config(args: argparse.Namespace) -> CompareConfig:
     """Defaults < --config file < flags; every value checked before any trial runs."""
+    from planners.base import BUDGET_CLOCKS
     from planners.registry import parse_planner_list
     from scenes.spec import available_variants
 
@@ -177,6 +182,8 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
         values.update(from_file)
         source = f"--config {args.config}: "
         given.update({k: (f"--config {args.config} {k}", v) for k, v in from_file.items()})
+    if args.budget_clock is not None and args.budget_clock not in BUDGET_CLOCKS:
+        raise SuiteError(f"--budget-clock {args.budget_clock!r}: allowed: {', '.join(BUDGET_CLOCKS)}")
     for key in FLAG_SETTINGS:
         v = getattr(args, key)
         if v is not None:
@@ -483,11 +490,21 @@ def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path, *, s
     if scenario is not None and not any(t.problem.scene.variant in ("open", "wall") for t in trials):
         raise SuiteError("--moving-bin runs on open and wall scenes; this run has none (select them, e.g. "
                          f"--dataset {DEFAULT_TIER_MOVING}, or --variant open)")
+    from suite.run.contention import machine_across, machine_sample, run_contention
+    from suite.run.records import read_trials
+
+    machine0 = machine_sample()
     counts = run_trials(trials, out=out, jobs=config.jobs, executor=executor,
                         scheduler=config.scheduler, progress_bar=not args.no_progress,
                         hard_limit_grace_s=config.hard_limit_grace_s)
+    contention = run_contention(read_trials(out / TRIALS_FILE), machine=machine_across(machine0))
     update_manifest(out, status="complete", finished_utc=_now(),
-                    trials_recorded=counts["skipped"] + counts["ran"], trials_total=counts["total"])
+                    trials_recorded=counts["skipped"] + counts["ran"], trials_total=counts["total"],
+                    contention=contention)
+    if contention["run_contended"]:
+        print(f"warning: the machine was contended: {contention['contended']} of {contention['measured']} trial(s) "
+              f"waited for a CPU (or lost it to steal), {100 * (contention['cpu_wait_share'] or 0):.0f}% of the "
+              "planning wall time in all; summary.md names them", file=sys.stderr)
     if scenario is not None:
         _execute_moving_bin(trials, out, config, speeds=args.moving_bin, scenario=scenario,
                             scenes=args.moving_bin_scenes, progress_bar=not args.no_progress)

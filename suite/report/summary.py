@@ -78,7 +78,9 @@ def summary_json(
     simplify_time_s, length_before_rad, length_after_rad, length_kept} (OMPL planners; null otherwise),
     post_processing (what the planner does to its first solution, from its config), metrics: {METRIC: {median,
     q1, q3, n}}, time_to_solve_s, common_subset: {METRIC: {median, n}}, by_family: {FAMILY: {success,
-    metrics}}, by_kind: {KIND: {success, metrics}}}}, metrics (their definitions), paired: [...].
+    metrics}}, by_kind: {KIND: {success, metrics}}}}, metrics (their definitions), paired: [...],
+    contention: {rule, budget_clock, trials, measured, contended, contended_ids, by_planner: {NAME:
+    {measured, contended}}, cpu_wait_share, load1: {median, max}} (`suite.run.contention`).
     """
     counts = problem_counts(records)
     summary = summary or summarize_run(records, planners=planners)
@@ -118,6 +120,9 @@ def summary_json(
                                     "metrics": {m: _stats_json(h.metrics[m]) for m in SUMMARY_METRICS}}
                         for h in split["problem"] if h.planner == p},
         }
+    from suite.report.summary_contention import contention_json
+
+    out["contention"] = contention_json(records)
     out["paired"] = [
         {"metric": c.metric, "a": c.planner_a, "b": c.planner_b, "n": c.n, "scenes": c.scenes,
          "median_diff": _num(c.median_diff), "ci95": [_num(c.ci_low), _num(c.ci_high)], "p_value": _num(c.p_value),
@@ -193,6 +198,13 @@ def write_summary(
     summary = summary or summarize_run(records, planners=planners)
     md = summary_markdown(records, pairs=pairs, planners=planners, title=title or f"Run summary: {run_dir.name}",
                           summary=summary)
+    from suite.report.summary_contention import contention_markdown, contention_warning
+
+    warning = contention_warning(records)
+    if warning:  # under the title, before any figure it concerns
+        head, _, rest = md.partition("\n")
+        md = f"{head}\n\n{warning}\n{rest}"
+    md += "\n" + contention_markdown(records, planners)
     if budget_records:
         from suite.report.budgets import budget_table
 

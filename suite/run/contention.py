@@ -22,6 +22,11 @@ ticks: below it one preemption decides), or when the machine's steal was more th
 figures, not fitted to any run: 10% of a budget is the margin by which a wall-clock deadline moves
 a late trial's outcome, and 5% steal is where cloud providers start to warn. A quiet machine running
 one worker per core gives waits of a few milliseconds at most.
+
+A **run** is contended (`run_contention`'s `run_contended`) when any of its trials is, or when a
+planner's trials together waited for a CPU more than `WAIT_SHARE` of their planning wall time (and
+at least `WAIT_MIN_S`): trials of a few milliseconds each stay under the per-trial floor, yet their
+times, taken together, are stretched.
 """
 
 from __future__ import annotations
@@ -44,7 +49,9 @@ STEAL_MIN_S = 0.05
 #: The rule in one line, for manifests, summaries and reports.
 RULE = (f"a trial is contended when its process waited for a CPU more than {WAIT_SHARE:.0%} of its planning wall "
         f"time (and at least {WAIT_MIN_S * 1000:g} ms), or when the machine's steal was above {STEAL_SHARE:.0%} "
-        f"of its CPU time across the trial (and at least {STEAL_MIN_S * 1000:g} ms)")
+        f"of its CPU time across the trial (and at least {STEAL_MIN_S * 1000:g} ms); a run is contended when a "
+        f"trial is, or when one planner's trials together waited more than {WAIT_SHARE:.0%} of their planning "
+        "wall time")
 #: Ticks per second of /proc/stat's counters.
 _HZ = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
@@ -204,19 +211,20 @@ def run_contention(records: Sequence[dict[str, Any]], *, machine: dict[str, Any]
 
     Returns:
         {rule, budget_clock, trials, measured, contended, contended_ids, by_planner: {NAME:
-        {measured, contended}}, cpu_wait_share, load1: {median, max}, machine}.
+        {measured, contended, cpu_wait_s, planning_wall_s, cpu_wait_share, contended_together}},
+        cpu_wait_share, load1: {median, max}, run_contended, machine}.
     """
     measured = contended = 0
     ids: list[str] = []
-    by_planner: dict[str, dict[str, int]] = {}
-    wait_s = wall_s = 0.0
+    by_planner: dict[str, dict[str, Any]] = {}
     loads: list[float] = []
     for rec in records:
         verdict = record_contended(rec)
         if verdict is None:
             continue
         measured += 1
-        p = by_planner.setdefault(str(rec.get("planner")), {"measured": 0, "contended": 0})
+        p = by_planner.setdefault(str(rec.get("planner")), {"measured": 0, "contended": 0, "cpu_wait_s": 0.0,
+                                                            "planning_wall_s": 0.0})
         p["measured"] += 1
         if verdict:
             contended += 1
@@ -224,12 +232,21 @@ def run_contention(records: Sequence[dict[str, Any]], *, machine: dict[str, Any]
             ids.append(str(rec.get("trial_id")))
         c = rec["contention"]
         if isinstance(c.get("cpu_wait_s"), (int, float)) and isinstance(rec.get("planning_time_s"), (int, float)):
-            wait_s += c["cpu_wait_s"]
-            wall_s += rec["planning_time_s"]
+            p["cpu_wait_s"] += c["cpu_wait_s"]
+            p["planning_wall_s"] += rec["planning_time_s"]
         if isinstance(c.get("load1"), (int, float)):
             loads.append(float(c["load1"]))
+    for p in by_planner.values():
+        wait, wall = p["cpu_wait_s"], p["planning_wall_s"]
+        p["cpu_wait_share"] = round(wait / wall, 4) if wall > 0 else None
+        p["contended_together"] = wall > 0 and wait >= WAIT_MIN_S and wait > WAIT_SHARE * wall
+        p["cpu_wait_s"], p["planning_wall_s"] = round(wait, 6), round(wall, 6)
+    wait_s = sum(p["cpu_wait_s"] for p in by_planner.values())
+    wall_s = sum(p["planning_wall_s"] for p in by_planner.values())
     clocks = sorted({str(r.get("budget_clock", "wall")) for r in records})
     return {"rule": RULE, "budget_clock": clocks[0] if len(clocks) == 1 else clocks, "trials": len(records),
             "measured": measured, "contended": contended, "contended_ids": ids, "by_planner": by_planner,
             "cpu_wait_share": round(wait_s / wall_s, 4) if wall_s > 0 else None,
-            "load1": {"median": _median(loads), "max": max(loads) if loads else None}, "machine": machine}
+            "load1": {"median": _median(loads), "max": max(loads) if loads else None},
+            "run_contended": bool(contended or any(p["contended_together"] for p in by_planner.values())),
+            "machine": machine}

@@ -84,7 +84,9 @@ def _duration_s(start: str | None, end: str | None) -> float | None:
 
 def _budgets(records: Sequence[dict[str, Any]]) -> str:
     values = sorted({float(r["time_limit_s"]) for r in records if isinstance(r.get("time_limit_s"), (int, float))})
-    return ", ".join(f"{v:g} s" for v in values) or "not recorded"
+    clocks = {str(r.get("budget_clock", "wall")) for r in records}
+    of = " of CPU time" if clocks == {"cpu"} else (" (wall and CPU clocks)" if len(clocks) > 1 else "")
+    return (", ".join(f"{v:g} s" for v in values) + of) if values else "not recorded"
 
 
 def headline_facts(run_dir: Path, manifest: dict[str, Any], records: Sequence[dict[str, Any]],
@@ -96,7 +98,17 @@ def headline_facts(run_dir: Path, manifest: dict[str, Any], records: Sequence[di
               else "generated scenes")
     return (f'<p class="facts">{len(records)} trials &middot; {len(planners)} planners '
             f'({esc(", ".join(planners))}) &middot; {source} &middot; budget {esc(_budgets(records))} per problem'
-            f'</p><p class="facts">{esc(composition(records))}</p>' + _provenance_line(manifest))
+            f'</p><p class="facts">{esc(composition(records))}</p>' + _provenance_line(manifest)
+            + _contention_warning(records))
+
+
+def _contention_warning(records: Sequence[dict[str, Any]]) -> str:
+    """summary.md's warning when trials were contended (`suite.report.summary_contention`), or nothing."""
+    from suite.report.summary_contention import contention_warning
+
+    warning = contention_warning(records)
+    return f'<div class="note contended" style="border-left:4px solid #c60;padding-left:8px">{inline_md(warning)}</div>' \
+        if warning else ""
 
 
 def _provenance_line(manifest: dict[str, Any]) -> str:
