@@ -22,6 +22,7 @@ TARGETS = {
     "budget-flip": "suite.bench.budget_flip",
     "machine": "suite.bench.machine",
     "kernel": "suite.bench.kernel",
+    "load": "suite.bench.load",
 }
 
 
