@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from suite.cli.args import nonneg_int, positive_int
+from suite.cli.args import nonneg_int, positive_float, positive_int
 from suite.problems import DEFAULT_DATASET
 
 RESOLUTIONS_RAD = (0.05, 0.01)
@@ -59,17 +59,20 @@ class Differential:
     examples: list = dataclasses.field(default_factory=list)
 
 
-def draw_worlds(dataset: str = DEFAULT_DATASET) -> list[tuple]:
+def draw_worlds(dataset: str = DEFAULT_DATASET, *, pick: int = 0) -> list[tuple]:
     """(family, problem, points) per world: per family of the dataset, the first benchmark problem
-    with a held can and the first without, each at its own gripper opening and at the other one
-    (open, or closed on the can); `points` are its start, goal and witness (or reference) states."""
+    with a held can and the first without (the `pick`-th, counting from 0, where there are that
+    many; else the last), each at its own gripper opening and at the other one (open, or closed
+    on the can); `points` are its start, goal and witness (or reference) states."""
     from suite.problems.dataset import load_dataset
 
     ds = load_dataset(dataset)
     chosen: dict[tuple[str, bool], tuple] = {}
+    seen: dict[tuple[str, bool], int] = {}
     for pid, p in zip(ds.ids, ds.problems):
         key = (ds.meta[pid]["family"], p.held is not None)
-        if key not in chosen:
+        seen[key] = seen.get(key, 0) + 1
+        if seen[key] <= pick + 1:
             path = ds.witnesses.get(pid, ds.references[pid])
             chosen[key] = (p, np.vstack([p.q_start, p.q_goal, path]))
     out = []
@@ -104,7 +107,7 @@ def _motions(rng, points: np.ndarray, n: int) -> list[tuple[np.ndarray, np.ndarr
 
 
 def differential(*, states_per_world: int, motions_per_world: int, seed: int = 0,
-                 dataset: str = DEFAULT_DATASET, keep_examples: int = 5) -> Differential:
+                 dataset: str = DEFAULT_DATASET, pick: int = 0, keep_examples: int = 5) -> Differential:
     """Decide the same states and motions with the numpy and the compiled world (see the module
     docstring); returns the counts and the seconds each spent."""
     from scenes.fcl_compiled import CompiledWorld
@@ -112,7 +115,7 @@ def differential(*, states_per_world: int, motions_per_world: int, seed: int = 0
 
     perf = time.perf_counter
     out = Differential()
-    for w, (family, p, points) in enumerate(draw_worlds(dataset)):
+    for w, (family, p, points) in enumerate(draw_worlds(dataset, pick=pick)):
         kw = dict(gripper_opening_m=p.gripper_opening_m, held=p.held, removed_can_ids=p.removed_can_ids)
         ref, fast = CollisionWorld(p.scene, **kw), CompiledWorld(p.scene, **kw)
         rng = np.random.default_rng([seed, w])
@@ -161,16 +164,55 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--motions", type=positive_int, default=100_000, help="motions in all (default 100,000)")
     p.add_argument("--seed", type=nonneg_int, default=0, help="the draws' seed (default 0)")
     p.add_argument("--json", action="store_true", help="print the counts as JSON")
+    p.add_argument("--dataset", default=DEFAULT_DATASET, help=f"the worlds' dataset (default {DEFAULT_DATASET})")
+    p.add_argument("--pick", type=nonneg_int, default=0,
+                   help="which problem of each family and held/not gives its worlds, from 0 (default 0)")
+    g = p.add_argument_group("near contact (--near-contact)")
+    g.add_argument("--near-contact", action="store_true",
+                   help="the boundary check instead: bisected free/colliding states and grazing motions, compiled, "
+                        "numpy and python-fcl alone, every disagreement judged by a certified signed distance")
+    g.add_argument("--segments", type=positive_int, default=40, help="bisected state segments per world (default 40)")
+    g.add_argument("--grazing", type=nonneg_int, default=8, help="bisected motion shifts per world (default 8)")
+    g.add_argument("--tol-rad", type=positive_float, default=1e-9,
+                   help="bisect until the two ends are this close, max over joints (default 1e-9; at most 1e-6)")
+    g.add_argument("--families", default=None, metavar="F,...", help="only these families (default all)")
+
+
+def _run_near_contact(args: argparse.Namespace) -> int:
+    from scenes.errors import SuiteError
+    from suite.bench.near_contact import CONTACT_TOL_M, near_contact, report
+
+    if args.tol_rad > 1e-6:
+        raise SuiteError(f"--tol-rad {args.tol_rad:g} is coarser than 1e-6 rad: the bisection must reach the boundary")
+    fams = [f for f in args.families.split(",") if f] if args.families else None
+    worlds = draw_worlds(args.dataset, pick=args.pick)
+    known = sorted({f for f, _, _ in worlds})
+    if fams and not set(fams) <= set(known):
+        raise SuiteError(f"--families {args.families!r}: {args.dataset} has {', '.join(known)}")
+    nc = near_contact(pairs_per_world=args.segments, brackets_per_world=args.grazing, seed=args.seed,
+                      tol_rad=args.tol_rad, families=fams, worlds=worlds)
+    if args.json:
+        print(json.dumps({"summary": nc.summary(),
+                          "disputes": [{**dataclasses.asdict(x), "truth": x.bounds.truth, "wrong": list(x.wrong)}
+                                       for x in nc.disputes]}))
+    else:
+        print("\n".join(report(nc, dataset=args.dataset, pick=args.pick, seed=args.seed)))
+    # a defect: a disagreement far from contact, or the kernel's own decision refuted
+    far = any(x.bounds.within_m >= CONTACT_TOL_M for x in nc.disputes)
+    kernel_wrong = any("compiled" in x.wrong and x.compiled_by == "kernel" for x in nc.disputes)
+    return 1 if far or kernel_wrong else 0
 
 
 def run(args: argparse.Namespace) -> int:
-    n_worlds = len(draw_worlds())
+    if getattr(args, "near_contact", False):
+        return _run_near_contact(args)
+    n_worlds = len(draw_worlds(args.dataset, pick=args.pick))
     d = differential(states_per_world=-(-args.states // n_worlds), motions_per_world=-(-args.motions // n_worlds),
-                     seed=args.seed)
+                     seed=args.seed, dataset=args.dataset, pick=args.pick)
     if args.json:
         print(json.dumps(dataclasses.asdict(d)))
         return 0 if not (d.state_disagreements or d.single_disagreements or d.motion_disagreements) else 1
-    print(f"differential check, compiled kernels against the numpy reference: {d.worlds} worlds of {DEFAULT_DATASET} "
+    print(f"differential check, compiled kernels against the numpy reference: {d.worlds} worlds of {args.dataset} "
           f"(every family, held and not, two gripper openings), seed {args.seed}")
     print(f"  states:  {d.states:,} ({d.free_states / d.states:.1%} free): disagreements batched {d.state_disagreements}, "
           f"one at a time {d.single_disagreements}")
