@@ -16,6 +16,10 @@ batched (`states_free`) and one at a time (`is_free`); every motion by both worl
 `motion_samples_free`. Any disagreement is a defect: the figures print them, and
 `tests/scenes/test_fcl_compiled.py` runs a small draw in the default test run and the full one
 (`-m slow`).
+
+`--near-contact` probes where uniform draws rarely land, the free/colliding boundary: bisected
+states and grazing motions, decided by the two worlds and by python-fcl alone, every
+disagreement judged by a certified signed distance (`suite.bench.near_contact`).
 """
 
 from __future__ import annotations
