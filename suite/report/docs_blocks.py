@@ -107,7 +107,7 @@ def answer_table(root: Path) -> str:
             c[0] += int(e.get("cans_in_bin", 0))
             c[1] += int(e.get("cans_total", 0))
     lines = [("| planner | success (95% CI) | exact verdict: certified / unproved / collision | time to solve (s) "
-              "| length / best known (post-processing) | min clearance (mm) | cans in the bin, in physics |"),
+              "| length / best known; post-processing | min clearance (mm) | cans in the bin, in physics |"),
              "|---|---|---|---|---|---|---|"]
     for name, p in summary["planners"].items():
         post = p.get("post_processing")
@@ -123,8 +123,8 @@ def answer_table(root: Path) -> str:
             f"| {PLANNER_LABELS.get(name, f'`{name}`')}",
             f"{s['k']}/{s['n']} ({_pct(s['k'], s['n'])} [{lo}, {hi}])",
             f"{cert.get('certified', 0)} / {cert.get('unproved', 0)} / {cert.get('collision', 0)}",
-            "-" if tts is None else f"{tts:.3f}",
-            ("-" if ratio is None else f"{ratio:.2f}") + ("" if post is None else f" ({post})"),
+            "-" if tts is None else f"{tts:.2g}" if tts < 0.01 else f"{tts:.3f}",
+            ("-" if ratio is None else f"{ratio:.2f}") + ("" if post is None else f"; {post}"),
             "-" if clear is None else f"{1000 * clear:.1f}",
             "-" if k is None else f"{k}/{n} |",
         ]))

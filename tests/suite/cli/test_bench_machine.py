@@ -99,10 +99,6 @@ def test_the_readme_reference_is_shipped_and_complete():
     assert ref["quickstart_wall_s"] > 0  # the README's Quickstart figure, measured on the same machine
 
 
-@pytest.mark.xfail(strict=True, raises=SuiteError, reason=(
-    "results/reference/machine.json predates the pinned workload (no digest): re-measure it on a quiet machine "
-    "with `python -m suite bench machine --against '' --save results/reference/machine.json --quickstart-wall-s S` "
-    "(docs/timing.md), then remove this mark"))
 def test_the_readme_reference_was_measured_on_the_pinned_workload():
     check_workload(read_reference(REFERENCE_FILE), WORKLOAD, path=REFERENCE_FILE)
 
