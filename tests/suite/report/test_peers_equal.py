@@ -162,7 +162,10 @@ def test_suite_docs_writes_the_table_from_clean_runs_and_refuses_a_dirty_one(tmp
     root = tmp_path
     (root / "docs").mkdir()
     shutil.copy(Path(__file__).resolve().parents[3] / "docs" / "peers.md", root / "docs" / "peers.md")
-    assert docs_blocks.render(root, write=False, only=["peers-equal-table"]) == []  # the placeholder, as committed
+    # without an analysis the block is the placeholder (the committed page holds the measured table)
+    docs_blocks.render(root, write=True, only=["peers-equal-table"])
+    assert "_Not measured yet:" in (root / "docs" / "peers.md").read_text(encoding="utf-8")
+    assert docs_blocks.render(root, write=False, only=["peers-equal-table"]) == []
     setting = root / "results" / "peers-equal" / "step-0.01-range-1"
     _write_run(setting / "seed-0", seed=0, times={"rrt": [0.1, 0.2], "roboplan-rrt": [0.2, 0.4]})
     rel = "results/peers-equal/step-0.01-range-1"
