@@ -260,11 +260,12 @@ def table_rows(results: Sequence[CandidateResult], *, chosen: int, pooled: int |
     def num(v: float, digits: int = 4) -> float | None:
         return round(v, digits) if math.isfinite(v) else None
 
-    def versus(i: int, metric: str) -> list[float | None] | None:
+    def versus(i: int, metric: str) -> dict[str, list[float | None]]:
+        """{"<metric>_vs_chosen": [ratio, lo, hi]}, or {} for the chosen row or nothing to pair."""
         if i == chosen or not results[i].per_problem:
-            return None
+            return {}
         pr = paired_ratio(results[chosen], results[i], metric=metric)
-        return [num(pr.ratio, 3), num(pr.lo, 3), num(pr.hi, 3)] if math.isfinite(pr.ratio) else None
+        return {f"{metric}_vs_chosen": [num(pr.ratio, 3), num(pr.lo, 3), num(pr.hi, 3)]} if math.isfinite(pr.ratio) else {}
 
     return [{
         "chosen": i == chosen,
@@ -278,8 +279,8 @@ def table_rows(results: Sequence[CandidateResult], *, chosen: int, pooled: int |
         "family_solved_mean": num(r.family_solved_mean),
         "family_time_to_solve_median_s": num(r.family_time_to_solve_median_s),
         "family_length_ratio_common_median": num(r.family_length_ratio_common_median),
-        **({} if versus(i, "time") is None else {"time_vs_chosen": versus(i, "time")}),
-        **({} if versus(i, "length") is None else {"length_vs_chosen": versus(i, "length")}),
+        **versus(i, "time"),
+        **versus(i, "length"),
     } for i, r in enumerate(results)]
 
 
