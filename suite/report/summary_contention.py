@@ -4,13 +4,12 @@ defines it)."""
 
 from __future__ import annotations
 
-import statistics
 from collections.abc import Sequence
 from typing import Any
 
 from tabulate import tabulate
 
-from suite.run.contention import RULE, WAIT_SHARE, record_contended, run_contention
+from suite.run.contention import RULE, WAIT_SHARE, median_or_none, record_contended, run_contention
 
 #: How many contended trials a warning names before it counts the rest.
 NAMED_TRIALS = 10
@@ -57,10 +56,6 @@ def contention_warning(records: Sequence[dict[str, Any]]) -> str | None:
     return " ".join(parts) + f" Rule: {RULE}."
 
 
-def _median(values: list[float]) -> float | None:
-    return statistics.median(values) if values else None
-
-
 def contention_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     """Per planner: trials measured and contended, median CPU / wall, share of planning wall time spent
     waiting for a CPU, median load average."""
@@ -75,7 +70,7 @@ def contention_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) 
         waits = [(w, t) for w, t in waits if isinstance(w, (int, float)) and isinstance(t, (int, float))]
         loads = [r["contention"]["load1"] for r in mine if isinstance(r["contention"].get("load1"), (int, float))]
         wall = sum(t for _, t in waits)
-        ratio, load = _median(ratios), _median(loads)
+        ratio, load = median_or_none(ratios), median_or_none(loads)
         rows.append([p, len(mine), sum(bool(record_contended(r)) for r in mine),
                      "n/a" if ratio is None else f"{ratio:.2f}",
                      "n/a" if not wall else f"{100 * sum(w for w, _ in waits) / wall:.1f}%",

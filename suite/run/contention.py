@@ -200,7 +200,8 @@ def machine_across(before: MachineSample) -> dict[str, Any]:
     return out
 
 
-def _median(values: list[float]) -> float | None:
+def median_or_none(values: list[float]) -> float | None:
+    """The median, or None for no values."""
     return statistics.median(values) if values else None
 
 
@@ -247,6 +248,6 @@ def run_contention(records: Sequence[dict[str, Any]], *, machine: dict[str, Any]
     return {"rule": RULE, "budget_clock": clocks[0] if len(clocks) == 1 else clocks, "trials": len(records),
             "measured": measured, "contended": contended, "contended_ids": ids, "by_planner": by_planner,
             "cpu_wait_share": round(wait_s / wall_s, 4) if wall_s > 0 else None,
-            "load1": {"median": _median(loads), "max": max(loads) if loads else None},
+            "load1": {"median": median_or_none(loads), "max": max(loads) if loads else None},
             "run_contended": bool(contended or any(p["contended_together"] for p in by_planner.values())),
             "machine": machine}

@@ -84,8 +84,10 @@ def _duration_s(start: str | None, end: str | None) -> float | None:
 
 def _budgets(records: Sequence[dict[str, Any]]) -> str:
     values = sorted({float(r["time_limit_s"]) for r in records if isinstance(r.get("time_limit_s"), (int, float))})
-    clocks = {str(r.get("budget_clock", "wall")) for r in records}
-    of = " of CPU time" if clocks == {"cpu"} else (" (wall and CPU clocks)" if len(clocks) > 1 else "")
+    from suite.report.summary_contention import budget_clocks
+
+    clocks = budget_clocks(records)
+    of = " of CPU time" if clocks == ["cpu"] else (" (wall and CPU clocks)" if len(clocks) > 1 else "")
     return (", ".join(f"{v:g} s" for v in values) + of) if values else "not recorded"
 
 
