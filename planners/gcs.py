@@ -214,7 +214,7 @@ def _grow_online(A: list, b: list, edges: list, seeds: list, q: np.ndarray, *, b
     grown = builder.grow(q)
     if grown is None:
         return False
-    Ai, bi, _ = grown
+    Ai, bi, _, _ = grown
     o = builder.options
     Ai, bi, _ = check_with_world(Ai, bi, world=world, center=q, keep=[q], samples=o.check_samples,
                                  rounds=o.check_rounds, margin_rad=o.configuration_space_margin_rad, seed=o.random_seed)

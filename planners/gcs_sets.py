@@ -31,6 +31,20 @@ DEFAULT_CACHE_DIR = Path(__file__).resolve().parents[1] / "results" / "regions"
 DATASETS_DIR = Path(__file__).resolve().parents[1] / "scenes" / "datasets"
 
 
+SAMPLING_STRATEGIES = ("greedy", "ray")
+NP2_SOLVERS = ("snopt", "ipopt")
+#: IRIS options named after region sets had been built with Drake's defaults for them: each stays
+#: out of the cache key while it holds the value those sets were built with (Drake 1.51's
+#: default; `relax_margin` was always on), so that the shipped sets keep their names.
+UNKEYED_DEFAULTS = {
+    "termination_threshold": 0.02, "relative_termination_threshold": 0.001, "tau": 0.5, "mixing_steps": 50,
+    "require_sample_point_is_contained": True, "remove_all_collisions_possible": True, "relax_margin": True,
+    "sample_particles_in_parallel": False, "sampling_strategy": "greedy", "ray_search_num_steps": 10,
+    "num_particles_to_walk_towards": 200, "only_walk_toward_collisions": False,
+    "add_hyperplane_if_solve_fails": False, "np2_solver": "snopt", "bisection_steps": 10,
+}
+
+
 @dataclasses.dataclass(frozen=True)
 class RegionOptions:
     """How regions are grown (every field enters the cache key).
@@ -73,6 +87,41 @@ class RegionOptions:
         min_clique: smallest clique that makes a region ("cliques"; at least 8 in 7-D).
         coverage: stop the clique cover once this fraction of fresh task-neighbourhood samples
             lies in some region ("cliques").
+
+    The rest are the options IRIS reads (`IrisNp2Options`, `IrisZoOptions` and their
+    `sampled_iris_options`, Drake 1.51), each set explicitly so that no region depends on a
+    default a reader cannot see or that a Drake release may change. Their values here are Drake
+    1.51's defaults, except `relax_margin` (always on here); `UNKEYED_DEFAULTS` keeps them out of
+    the cache key while they hold these values, so the region sets built before they were named
+    keep their names.
+
+        termination_threshold: IRIS stops when an iteration grows the inscribed ellipsoid's
+            volume (rad^7) by at most this much (absolute; negative: off). Drake's 0.02 stops a
+            region whose ellipsoid is smaller than that after its first iteration, whatever
+            `max_iterations` says (iris_np2.cc, CheckTerminationConditions).
+        relative_termination_threshold: ... or by at most this fraction of the last volume.
+        tau: the statistical test's decision threshold (Drake's unadaptive test).
+        mixing_steps: hit-and-run steps between the uniform samples of a region.
+        require_sample_point_is_contained: stop iterating once the seed would leave the region.
+        remove_all_collisions_possible: keep adding faces until every particle found in collision
+            is cut off (or `max_separating_planes_per_iteration` is reached).
+        relax_margin: shrink the configuration-space margin where it would cut off a
+            containment point.
+        sample_particles_in_parallel: draw particles on `threads` threads (changes the draws).
+        sampling_strategy: IrisNp2 only: "greedy" (the closest collision from each particle in
+            collision) or "ray" (walk from the centre toward particles).
+        ray_search_num_steps, num_particles_to_walk_towards, only_walk_toward_collisions:
+            IrisNp2's "ray" strategy.
+        add_hyperplane_if_solve_fails: IrisNp2: add a face at a particle whose closest-collision
+            program fails, rather than skip it.
+        np2_solver: IrisNp2's nonlinear solver for the closest collisions, "snopt" or "ipopt"
+            (Drake takes the first available of the two: SNOPT in the pip wheels).
+        bisection_steps: IrisZo's bisection steps toward each particle in collision.
+      Not options here, because the suite never changes them: IRIS's `parameterization` (the
+      identity: regions are in joint space), `solver_options` (the solver's defaults),
+      `prog_with_additional_constraints` (none), `meshcat` (none), `verbose` (on, to record each
+      region's iterations), `containment_points` (set by the seeding) and `parallelism`
+      (`threads`).
     """
 
     iris: str = "np2"
@@ -99,12 +148,36 @@ class RegionOptions:
     clique_samples: int = 200
     min_clique: int = 10
     coverage: float = 0.7
+    termination_threshold: float = 0.02
+    relative_termination_threshold: float = 0.001
+    tau: float = 0.5
+    mixing_steps: int = 50
+    require_sample_point_is_contained: bool = True
+    remove_all_collisions_possible: bool = True
+    relax_margin: bool = True
+    sample_particles_in_parallel: bool = False
+    sampling_strategy: str = "greedy"
+    ray_search_num_steps: int = 10
+    num_particles_to_walk_towards: int = 200
+    only_walk_toward_collisions: bool = False
+    add_hyperplane_if_solve_fails: bool = False
+    np2_solver: str = "snopt"
+    bisection_steps: int = 10
 
     def __post_init__(self):
         if self.iris not in IRIS_ALGORITHMS:
             raise SuiteError(f"gcs iris={self.iris!r}; allowed: {', '.join(IRIS_ALGORITHMS)}")
         if self.seeding not in SEEDINGS:
             raise SuiteError(f"gcs seeding={self.seeding!r}; allowed: {', '.join(SEEDINGS)}")
+        if self.sampling_strategy not in SAMPLING_STRATEGIES:
+            raise SuiteError(f"gcs sampling_strategy={self.sampling_strategy!r}; allowed: {', '.join(SAMPLING_STRATEGIES)}")
+        if self.np2_solver not in NP2_SOLVERS:
+            raise SuiteError(f"gcs np2_solver={self.np2_solver!r}; allowed: {', '.join(NP2_SOLVERS)}")
+        if not 0 < self.tau < 1:
+            raise SuiteError(f"gcs tau={self.tau!r} must be in (0, 1)")
+        for name in ("mixing_steps", "ray_search_num_steps", "num_particles_to_walk_towards", "bisection_steps"):
+            if getattr(self, name) < 1:
+                raise SuiteError(f"gcs {name}={getattr(self, name)!r} must be >= 1")
         if not 0 < self.coverage <= 1:
             raise SuiteError(f"gcs coverage={self.coverage!r} must be in (0, 1]")
         if self.min_clique < 8:
@@ -128,6 +201,9 @@ class RegionOptions:
         """The fields that decide the regions (threads do not)."""
         d = dataclasses.asdict(self)
         d.pop("threads")
+        for name, value in UNKEYED_DEFAULTS.items():  # the key of the sets built before they were named
+            if d[name] == value:
+                d.pop(name)
         if self.seeding == "problem":  # the key of the sets built before world seedings existed
             for name in ("seeding", "segment_rad", "max_regions_per_world", "sample_sigma_rad", "clique_samples",
                          "min_clique", "coverage"):
@@ -163,6 +239,12 @@ class RegionSet:
         problems: problem hashes (start, goal) this set was grown for.
         edges: directed pairs (i, j) of intersecting regions (both directions listed).
         iris: the algorithm.
+        region_iris: per region, what its IRIS call did, from Drake's own log: `iterations` run,
+            `stop` (why it stopped: "iteration_limit", "absolute_threshold",
+            "relative_threshold", "seed_left_region", or "unknown"; several when several held
+            at once), `volume` (the final region's maximum inscribed ellipsoid, rad^7) and
+            `radius_rad` (the radius of the 7-ball of that volume). Empty for sets built before
+            it was recorded.
         checked: problem hashes for which the set was verified offline: the blocked start-goal
             segment cut out (`cut_blocked_segment`), start and goal connected, and GCS's path
             checked with the python-fcl world and repaired by cuts (`planners.gcs_solve.checked_path`).
@@ -178,6 +260,7 @@ class RegionSet:
     edges: list[tuple[int, int]] = dataclasses.field(default_factory=list)
     iris: str = "np2"
     checked: list[str] = dataclasses.field(default_factory=list)
+    region_iris: list[dict] = dataclasses.field(default_factory=list)
 
     def __len__(self) -> int:
         return len(self.A)
@@ -206,7 +289,7 @@ class RegionSet:
         sizes = np.array([len(b) for b in self.b], int)
         meta = {"format": FORMAT_VERSION, "world_hash": self.world_hash, "offline_s": self.offline_s,
                 "problems": self.problems, "iris": self.iris, "region_build_s": self.region_build_s,
-                "verified": self.checked}
+                "verified": self.checked, "region_iris": self.region_iris}
         save_npz_atomically(
             path, sizes=sizes,
             A=np.concatenate(self.A) if self.A else np.zeros((0, 7)),
@@ -227,7 +310,8 @@ class RegionSet:
             b = np.split(z["b"], cuts) if len(z["sizes"]) else []
             return cls(meta["world_hash"], list(A), list(b), list(z["seeds"]), list(meta["region_build_s"]),
                        float(meta["offline_s"]), list(meta["problems"]),
-                       [tuple(map(int, e)) for e in z["edges"]], meta["iris"], list(meta.get("verified", [])))
+                       [tuple(map(int, e)) for e in z["edges"]], meta["iris"], list(meta.get("verified", [])),
+                       list(meta.get("region_iris", [])))
 
 
 def problem_hash(problem, *, rule: str = CURRENT_RULE) -> str:

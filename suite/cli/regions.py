@@ -33,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b.add_argument("--iris", default=None, help="IRIS algorithm: np2 or zo (default: gcs's default)")
     b.add_argument("--seeding", default=None,
                    help="chain, cliques (from the world alone) or problem (at each problem's ends; default: gcs's default)")
+    b.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="region_set",
+                   help="a region option of gcs (planners.gcs_sets.RegionOptions: e.g. max_iterations=10, "
+                        "termination_threshold=-1); repeatable")
     b.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
     b.add_argument("--executor", choices=("local", "dask"), default="local", help="where jobs run (default local)")
     b.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://HOST:PORT (with --executor dask)")
@@ -43,6 +46,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b.add_argument("--rebuild", action="store_true",
                    help="grow every world from nothing, ignoring cached regions (e.g. to re-measure the offline "
                         "cost on a quiet machine, or after changing how regions grow)")
+
+
+def parse_region_settings(items: list[str]) -> dict:
+    """`--set NAME=VALUE` items as {name: value} (values read as YAML scalars), each name a field of
+    `RegionOptions`; anything else is one SuiteError line."""
+    import dataclasses
+
+    import yaml
+
+    from planners.gcs_sets import RegionOptions
+
+    names = sorted(f.name for f in dataclasses.fields(RegionOptions))
+    out = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq or name.strip() not in names:
+            raise SuiteError(f"--set {item!r}: expected NAME=VALUE with NAME one of {', '.join(names)}")
+        out[name.strip()] = yaml.safe_load(value)
+    return out
 
 
 def _connected(rs, problem) -> bool:
@@ -69,7 +91,7 @@ def _build_world(payload: tuple) -> dict:
     stored = None if rs is None else {
         "A": [a.tolist() for a in rs.A], "b": [x.tolist() for x in rs.b], "seeds": [q.tolist() for q in rs.seeds],
         "region_build_s": rs.region_build_s, "offline_s": rs.offline_s, "problems": rs.problems,
-        "edges": [list(e) for e in rs.edges], "iris": rs.iris, "checked": rs.checked,
+        "edges": [list(e) for e in rs.edges], "iris": rs.iris, "checked": rs.checked, "region_iris": rs.region_iris,
     }
     return {
         "set": stored,
@@ -79,6 +101,7 @@ def _build_world(payload: tuple) -> dict:
         "regions": 0 if rs is None else len(rs),
         "offline_s": 0.0 if rs is None else rs.offline_s,
         "region_build_s": [] if rs is None else list(rs.region_build_s),
+        "region_iris": [] if rs is None else list(rs.region_iris),
         "cache": [i["cache"] for i in infos],
         "wall_s": time.perf_counter() - t0,
     }
@@ -86,8 +109,9 @@ def _build_world(payload: tuple) -> dict:
 
 def run(args: argparse.Namespace) -> int:
 
-    from planners.gcs import GcsConfig
+    from planners.gcs import GcsPlanner
     from planners.gcs_regions import world_hash
+    from suite.run.trial import make_config
     from suite.problems.dataset import dataset_dir, load_dataset, parse_dataset_arg
 
     if args.scheduler and args.executor != "dask":
@@ -101,7 +125,8 @@ def run(args: argparse.Namespace) -> int:
         ds = load_dataset(args.dataset)
         problems = ds.problems
     chosen = {k: v for k, v in (("iris", args.iris), ("seeding", args.seeding)) if v is not None}
-    options = GcsConfig(**chosen).region_options()
+    chosen.update(parse_region_settings(args.region_set))
+    options = make_config(GcsPlanner, chosen).region_options()  # gcs's tuned settings, overlaid
     out = Path(args.out) if args.out else dataset_dir(parse_dataset_arg(args.dataset)[0]) / "regions"
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -168,23 +193,59 @@ def _record_world(k: int, outcome, items, out: Path, rows: list[dict]) -> None:
         RegionSet(row["world_hash"], [np.asarray(x, float) for x in stored["A"]],
                   [np.asarray(x, float) for x in stored["b"]], [np.asarray(x, float) for x in stored["seeds"]],
                   stored["region_build_s"], stored["offline_s"], stored["problems"],
-                  [tuple(e) for e in stored["edges"]], stored["iris"], stored["checked"],
+                  [tuple(e) for e in stored["edges"]], stored["iris"], stored["checked"], stored["region_iris"],
                   ).save(out / f"{row['world_hash']}.npz")
     rows.append(row)
-    print(f"[{k}/{len(items)}] {row['world_hash']}: {row['regions']} regions, "
+    its = [r["iterations"] for r in row.get("region_iris") or []]
+    print(f"[{k}/{len(items)}] {row['world_hash']}: {row['regions']} regions (IRIS iterations {its}), "
           f"{row['connected']}/{row['problems']} connected, offline {row['offline_s']:.1f} s "
           f"({'/'.join(row['cache'])})", flush=True)
 
 
-def summary_name(selection: str, seeding: str = "chain") -> str:
+def summary_name(selection: str, seeding: str = "chain", options=None) -> str:
     """The summary file of a build of `selection` (NAME[:TIER[:FILTERS]]) with `seeding`: one per
     tier, filters and seeding other than the chain, so that building regions for another tier of a
-    dataset, or with another seeding, keeps the earlier build's figures."""
+    dataset, or with another seeding, keeps the earlier build's figures; region `options` whose key
+    differs from the class defaults' (other than the algorithm and the seeding, which have flags of
+    their own) add a digest of that key."""
+    import hashlib
     import re
+
+    from planners.gcs_sets import RegionOptions
 
     rest = selection.partition(":")[2] or "all"
     tail = "" if seeding == "chain" else f"-{seeding}"
+    if options is not None:
+        mine = {k: v for k, v in options.key_fields().items() if k not in ("seeding", "iris")}
+        base = RegionOptions(seeding=options.seeding, iris=options.iris).key_fields()
+        base = {k: v for k, v in base.items() if k not in ("seeding", "iris")}
+        if mine != base:
+            tail += "-" + hashlib.sha1(json.dumps(mine, sort_keys=True).encode()).hexdigest()[:8]
     return "build-" + re.sub(r"[^A-Za-z0-9._=+-]+", "_", rest) + tail + ".json"
+
+
+def iris_figures(rows: list[dict]) -> dict:
+    """What IRIS did over the built regions: iterations per region (median, max, histogram), why
+    it stopped (counts), and the inscribed radius (rad: median, p10)."""
+    import numpy as np
+
+    regions = [r for row in rows for r in row.get("region_iris") or []]
+    if not regions:
+        return {"regions_recorded": 0}
+    its = [int(r["iterations"]) for r in regions]
+    stops: dict[str, int] = {}
+    for r in regions:
+        for reason in r["stop"]:
+            stops[reason] = stops.get(reason, 0) + 1
+    radii = [r["radius_rad"] for r in regions if r.get("radius_rad") is not None]
+    return {
+        "regions_recorded": len(regions),
+        "iterations_median": float(np.median(its)), "iterations_max": max(its),
+        "iterations_histogram": {str(k): its.count(k) for k in sorted(set(its))},
+        "stop": dict(sorted(stops.items())),
+        "radius_rad_median": float(np.median(radii)) if radii else None,
+        "radius_rad_p10": float(np.percentile(radii, 10)) if radii else None,
+    }
 
 
 def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, items: list) -> int:
@@ -198,11 +259,13 @@ def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, i
         "offline_s_max": max(r["offline_s"] for r in rows) if rows else None,
         "regions_median": statistics.median(r["regions"] for r in rows) if rows else None,
         "region_iris_s_median": statistics.median(per_region) if per_region else None,
+        "offline_s_p90": float(statistics.quantiles([r["offline_s"] for r in rows], n=10)[-1]) if len(rows) > 1 else None,
+        "iris_runs": iris_figures(rows),
         "size_bytes": sum(f.stat().st_size for f in out.glob("*.npz")),
         "worlds_detail": rows,
     }
     selection = args.dataset if args.tune_sample is None else f"{args.dataset}:tune-sample{args.tune_sample}"
-    (out / summary_name(selection, options.seeding)).write_text(json.dumps(summary, indent=1))
+    (out / summary_name(selection, options.seeding, options)).write_text(json.dumps(summary, indent=1))
     if not rows:
         print(f"no world was built: each of the {len(items)} failed (see above)", file=sys.stderr)
         return 1
@@ -210,6 +273,8 @@ def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, i
           f"{summary['offline_s_median']:.1f} s offline (max {summary['offline_s_max']:.1f} s), "
           f"{summary['regions_median']} regions; median IRIS "
           f"call {summary['region_iris_s_median'] or 0:.2f} s; start and goal connected for "
-          f"{summary['connected']}/{summary['problems']} problems; cache {summary['size_bytes'] / 1e6:.2f} MB",
+          f"{summary['connected']}/{summary['problems']} problems; IRIS iterations per region: median "
+          f"{summary['iris_runs'].get('iterations_median')}, stops {summary['iris_runs'].get('stop')}; "
+          f"cache {summary['size_bytes'] / 1e6:.2f} MB",
           file=sys.stdout)
     return 0
