@@ -91,15 +91,19 @@ class RegionOptions:
     The rest are the options IRIS reads (`IrisNp2Options`, `IrisZoOptions` and their
     `sampled_iris_options`, Drake 1.51), each set explicitly so that no region depends on a
     default a reader cannot see or that a Drake release may change. Their values here are Drake
-    1.51's defaults, except `relax_margin` (always on here); `UNKEYED_DEFAULTS` keeps them out of
-    the cache key while they hold these values, so the region sets built before they were named
-    keep their names.
+    1.51's defaults, except `relax_margin` (always on here) and the two termination thresholds
+    (the GCS paper's: off, and 2%). `UNKEYED_DEFAULTS` keeps each out of the cache key while it
+    holds the value the sets built before it was named were built with, and the thresholds stay
+    out while `max_iterations` is 1 (IRIS then stops after one iteration whatever they say), so
+    those sets keep their names.
 
         termination_threshold: IRIS stops when an iteration grows the inscribed ellipsoid's
-            volume (rad^7) by at most this much (absolute; negative: off). Drake's 0.02 stops a
-            region whose ellipsoid is smaller than that after its first iteration, whatever
-            `max_iterations` says (iris_np2.cc, CheckTerminationConditions).
-        relative_termination_threshold: ... or by at most this fraction of the last volume.
+            volume (rad^7) by at most this much (absolute; negative: off). Drake's default, 0.02,
+            stops every region whose ellipsoid is smaller than that after its first iteration,
+            whatever `max_iterations` says (iris_np2.cc, CheckTerminationConditions): a 7-D
+            ellipsoid of 0.3 rad radius has volume 0.001. The GCS paper turned it off (-1).
+        relative_termination_threshold: ... or by at most this fraction of the last volume
+            (the paper: 0.02; Drake's default 0.001).
         tau: the statistical test's decision threshold (Drake's unadaptive test).
         mixing_steps: hit-and-run steps between the uniform samples of a region.
         require_sample_point_is_contained: stop iterating once the seed would leave the region.
@@ -148,8 +152,8 @@ class RegionOptions:
     clique_samples: int = 200
     min_clique: int = 10
     coverage: float = 0.7
-    termination_threshold: float = 0.02
-    relative_termination_threshold: float = 0.001
+    termination_threshold: float = -1.0
+    relative_termination_threshold: float = 0.02
     tau: float = 0.5
     mixing_steps: int = 50
     require_sample_point_is_contained: bool = True
@@ -204,6 +208,9 @@ class RegionOptions:
         for name, value in UNKEYED_DEFAULTS.items():  # the key of the sets built before they were named
             if d[name] == value:
                 d.pop(name)
+        if self.max_iterations == 1:  # IRIS stops after its one iteration whatever the thresholds say
+            for name in ("termination_threshold", "relative_termination_threshold"):
+                d.pop(name, None)
         if self.seeding == "problem":  # the key of the sets built before world seedings existed
             for name in ("seeding", "segment_rad", "max_regions_per_world", "sample_sigma_rad", "clique_samples",
                          "min_clique", "coverage"):

@@ -62,13 +62,21 @@ def test_the_late_options_default_to_drakes_and_stay_out_of_the_key_until_change
     drake = IrisNp2Options()
     s = drake.sampled_iris_options
     defaults = RegionOptions()
-    for name in ("termination_threshold", "relative_termination_threshold", "tau", "mixing_steps",
-                 "require_sample_point_is_contained", "remove_all_collisions_possible",
+    for name in ("tau", "mixing_steps", "require_sample_point_is_contained", "remove_all_collisions_possible",
                  "sample_particles_in_parallel"):
         assert getattr(defaults, name) == getattr(s, name) == UNKEYED_DEFAULTS[name], name
+    for name in ("termination_threshold", "relative_termination_threshold"):  # the sets before were Drake's
+        assert getattr(s, name) == UNKEYED_DEFAULTS[name], name
+    assert (defaults.termination_threshold, defaults.relative_termination_threshold) == (-1.0, 0.02)  # the paper's
     assert defaults.relax_margin is True  # always on here, before it was named
-    assert not set(UNKEYED_DEFAULTS) & set(defaults.key_fields())
-    assert RegionOptions(termination_threshold=-1.0).key_fields()["termination_threshold"] == -1.0
+    assert defaults.max_iterations == 1 and not set(UNKEYED_DEFAULTS) & set(defaults.key_fields())
+    # With one iteration the thresholds cannot change a region, so they stay out of the key; with
+    # more they enter it, unless they hold the values the earlier sets were built with.
+    three = RegionOptions(max_iterations=3).key_fields()
+    assert (three["termination_threshold"], three["relative_termination_threshold"]) == (-1.0, 0.02)
+    drakes = RegionOptions(max_iterations=3, termination_threshold=0.02, relative_termination_threshold=0.001)
+    assert "termination_threshold" not in drakes.key_fields()
+    assert RegionOptions(tau=0.4).key_fields()["tau"] == 0.4
     with pytest.raises(SuiteError, match="sampling_strategy='spiral'; allowed: greedy, ray"):
         RegionOptions(sampling_strategy="spiral")
     with pytest.raises(SuiteError, match="np2_solver='nlopt'"):
