@@ -54,7 +54,24 @@ def grid(planner: str) -> list[dict]:
                 continue
         raise SuiteError(f"planner {planner!r} has no tuning search; planners with one: {', '.join(with_one)}")
     names = list(space)
-    return [dict(zip(names, values)) for values in itertools.product(*(space[n] for n in names))]
+    excluded = search_exclude(planner)
+    return [c for c in (dict(zip(names, values)) for values in itertools.product(*(space[n] for n in names)))
+            if not any(all(c.get(k) == v for k, v in rule.items()) for rule, _ in excluded)]
+
+
+def search_exclude(planner: str) -> list[tuple[dict, str]]:
+    """The candidates of the product the planner leaves out of its search, each with its reason
+    (its class's `search_exclude`: [(partial settings, reason)])."""
+    from planners.registry import planner_class
+
+    return [(dict(rule), str(reason)) for rule, reason in getattr(planner_class(planner), "search_exclude", ()) or ()]
+
+
+def offline_bound(planner: str) -> float | None:
+    """The bound on the planner's offline seconds per world at p90 (its class's `offline_bound_s`), or None."""
+    from planners.registry import planner_class
+
+    return getattr(planner_class(planner), "offline_bound_s", None)
 
 
 def tuning_problems(dataset: str, *, per_family: int | None, time_limit_s: float):
@@ -147,9 +164,13 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
         evaluated.append((settings, recorded(run_dir, trials)))
     results = evaluate(evaluated)
     objective = tuning_objective(args.planner)
-    explained = choose_explained(results, objective=objective, weighting="family")
+    bound = offline_bound(args.planner)
+    explained = choose_explained(results, objective=objective, weighting="family", offline_bound_s=bound)
     chosen = explained.index
-    pooled = choose(results, objective=objective, weighting="pooled")
+    pooled = choose(results, objective=objective, weighting="pooled", offline_bound_s=bound)
+    for i in explained.over_offline_bound:
+        print(f"out: {json.dumps(results[i].settings, default=str)} builds its worlds in {results[i].offline_p90_s:.0f} s "
+              f"at p90, over the {bound:g} s bound")
     rows = table_rows(results, chosen=chosen, pooled=pooled)
     _print_table(rows)
     weak = weak_families(results, chosen=chosen)
@@ -169,6 +190,10 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
             "weighting": f"family: {WEIGHTINGS['family']}",
             "objective": objective,
             "decided_by": explained.decided_by,
+            **({"offline_bound_s": bound,
+                "over_offline_bound": [results[i].settings for i in explained.over_offline_bound]} if bound else {}),
+            **({"excluded": [{"settings": rule, "why": why} for rule, why in search_exclude(args.planner)]}
+               if search_exclude(args.planner) else {}),
             "ties": {"solved": list(explained.solved_tied), "objective": list(explained.objective_tied),
                      "other_metric": list(explained.other_tied)},
             "pooled_choice": {"settings": results[pooled].settings, "weighting": f"pooled: {WEIGHTINGS['pooled']}"},

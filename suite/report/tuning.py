@@ -7,6 +7,10 @@ for a hard one. "pooled" (the rule before recycle-v3) counts problems and takes 
 of them; its choice is reported beside the shipped one.
 
 Rule (documented in docs/planners.md and written into the tuned-config file):
+-1. for a planner with offline work and a bound on it (`offline_bound_s` on its class: `gcs`'s
+   regions, which a user builds), a candidate whose offline seconds per world exceed the bound
+   at the 90th percentile over the tuning worlds is out, if any candidate is left (the default
+   must be one a user can build);
 0. a candidate that solves under half of a family's problems while another candidate solves more
    of them is out, if any candidate is left (`weak_families`);
 1. the most distinct problems solved wins;
@@ -38,7 +42,8 @@ import numpy as np
 from suite.report.outcomes import Outcome, outcomes, solved_count
 
 #: The rule in one line, as written into a tuned-config file.
-RULE = ("candidates under 50% on a family where another candidate solves more of it are out (if any is left); "
+RULE = ("candidates whose offline seconds per world exceed the planner's bound at p90 are out (if any is left); "
+        "candidates under 50% on a family where another candidate solves more of it are out (if any is left); "
         "then most distinct problems solved; then the objective: lowest median time to solve (failures at the "
         "budget) for 'time', lowest median length ratio on the problems every candidate solved for 'length'; a "
         "candidate ties with the best unless a paired bootstrap over the problems both ran (95%, scenes resampled "
@@ -82,6 +87,27 @@ class CandidateResult:
     #: per distinct problem (key) its family, scene, time to solve (failures at the budget) and
     #: length ratio (NaN unless solved): what the paired tests compare
     per_problem: dict[tuple, tuple[str, tuple, float, float]] = dataclasses.field(default_factory=dict, compare=False)
+    #: offline seconds per world (`stats.offline_s`, each world once, by `stats.world_hash`): the
+    #: 90th percentile and the worlds counted; NaN and 0 for a planner without offline work
+    offline_p90_s: float = math.nan
+    offline_worlds: int = 0
+
+
+def offline_per_world(records: Sequence[dict]) -> dict[str, float]:
+    """world -> the offline seconds its records report (`stats.offline_s` by `stats.world_hash`;
+    the largest when records of one world differ). Records without offline work are left out."""
+    out: dict[str, float] = {}
+    for r in records:
+        stats = r.get("stats") or {}
+        world, seconds = stats.get("world_hash"), stats.get("offline_s")
+        if world is not None and seconds is not None and seconds > 0:
+            out[world] = max(float(seconds), out.get(world, 0.0))
+    return out
+
+
+def p90(values: Sequence[float]) -> float:
+    """The 90th percentile (linear interpolation, numpy's default); NaN for no values."""
+    return float(np.percentile(np.asarray(values, float), 90)) if len(values) else math.nan
 
 
 def _median(values: Sequence[float]) -> float:
@@ -94,7 +120,8 @@ def evaluate(candidates: Sequence[tuple[dict[str, Any], Sequence[dict]]]) -> lis
     per: list[dict[tuple, Outcome]] = [outcomes(recs, metrics=TUNING_METRICS) for _, recs in candidates]
     common = set.intersection(*[{k for k, o in oc.items() if o.successes} for oc in per]) if per else set()
     out = []
-    for (settings, _), oc in zip(candidates, per):
+    for (settings, recs), oc in zip(candidates, per):
+        offline = offline_per_world(recs)
         families: dict[str, list[Outcome]] = {}
         for o in oc.values():
             families.setdefault(o.family, []).append(o)
@@ -112,6 +139,8 @@ def evaluate(candidates: Sequence[tuple[dict[str, Any], Sequence[dict]]]) -> lis
             family_length_ratio_common_median=_median([_median(v) for v in fam_common.values()]),
             per_problem={k: (o.family, o.scene, o.time_to_solve_s,
                              o.metrics["length_ratio"] if o.successes else math.nan) for k, o in oc.items()},
+            offline_p90_s=p90(list(offline.values())),
+            offline_worlds=len(offline),
         ))
     return out
 
@@ -214,16 +243,32 @@ class Choice:
     other_tied: tuple[int, ...]
     #: which step decided: "solved", "objective", "other metric" or "list order (tied on both metrics)"
     decided_by: str
+    #: the candidates over the offline bound at p90 (step -1), left out of the choice
+    over_offline_bound: tuple[int, ...] = ()
 
 
-def choose_explained(results: Sequence[CandidateResult], *, objective: str, weighting: str = "family") -> Choice:
+def within_offline_bound(results: Sequence[CandidateResult], bound_s: float | None) -> list[int]:
+    """The candidates whose offline seconds per world at p90 are within `bound_s` (all of them
+    when there is no bound, or when none is within it: the rule then has nothing to choose from)."""
+    every = list(range(len(results)))
+    if bound_s is None:
+        return every
+    within = [i for i in every if not results[i].offline_p90_s > bound_s]  # NaN (no offline work) is within
+    return within or every
+
+
+def choose_explained(results: Sequence[CandidateResult], *, objective: str, weighting: str = "family",
+                     offline_bound_s: float | None = None) -> Choice:
     """The chosen candidate (the module's rule) with the candidates each step left."""
     if objective not in ("time", "length"):
         raise ValueError(f"objective must be 'time' or 'length', got {objective!r}")
     if weighting not in WEIGHTINGS:
         raise ValueError(f"weighting must be one of {sorted(WEIGHTINGS)}, got {weighting!r}")
-    admissible = [i for i in range(len(results)) if not weak_families(results, chosen=i)]
-    pool = admissible or list(range(len(results)))
+    buildable = within_offline_bound(results, offline_bound_s)
+    over = tuple(i for i in range(len(results)) if i not in buildable)
+    admissible = [i for i in buildable if not weak_families([results[j] for j in buildable],
+                                                            chosen=buildable.index(i))]
+    pool = admissible or buildable
     family = weighting == "family"
     other = OTHER[objective]
 
@@ -246,12 +291,13 @@ def choose_explained(results: Sequence[CandidateResult], *, objective: str, weig
         how = "other metric"
     else:
         how = "list order (tied on both metrics)"
-    return Choice(index, tuple(tied), tuple(on_objective), tuple(on_other), how)
+    return Choice(index, tuple(tied), tuple(on_objective), tuple(on_other), how, over)
 
 
-def choose(results: Sequence[CandidateResult], *, objective: str, weighting: str = "family") -> int:
+def choose(results: Sequence[CandidateResult], *, objective: str, weighting: str = "family",
+           offline_bound_s: float | None = None) -> int:
     """The index of the chosen candidate (see the module's rule) under a weighting of WEIGHTINGS."""
-    return choose_explained(results, objective=objective, weighting=weighting).index
+    return choose_explained(results, objective=objective, weighting=weighting, offline_bound_s=offline_bound_s).index
 
 
 def table_rows(results: Sequence[CandidateResult], *, chosen: int, pooled: int | None = None) -> list[dict[str, Any]]:
@@ -279,6 +325,7 @@ def table_rows(results: Sequence[CandidateResult], *, chosen: int, pooled: int |
         "family_solved_mean": num(r.family_solved_mean),
         "family_time_to_solve_median_s": num(r.family_time_to_solve_median_s),
         "family_length_ratio_common_median": num(r.family_length_ratio_common_median),
+        **({"offline_p90_s": num(r.offline_p90_s, 1), "offline_worlds": r.offline_worlds} if r.offline_worlds else {}),
         **versus(i, "time"),
         **versus(i, "length"),
     } for i, r in enumerate(results)]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import numpy as np
@@ -12,7 +13,7 @@ from planners.registry import planner_class
 from planners.registry import BUILTIN
 from planners.tuned import objective, search_space, tuned_settings
 from scenes.errors import SuiteError
-from suite.cli.tune import grid, tuning_problems
+from suite.cli.tune import grid, search_exclude, tuning_problems
 from suite.report.tuning import CandidateResult, choose, choose_explained, differs, evaluate, paired_ratio, weak_families
 from suite.run.trial import make_config
 from tests.suite.report.test_summary import record
@@ -32,7 +33,11 @@ def test_every_search_starts_at_the_class_defaults(planner):
     assert set(space) <= set(defaults), f"{planner}: unknown settings in its search"
     assert {k: v[0] for k, v in space.items()} == {k: defaults[k] for k in space}
     assert grid(planner)[0] == {k: v[0] for k, v in space.items()}
-    assert len(grid(planner)) == math.prod(len(v) for v in space.values()) <= 8  # small, as documented
+    assert math.prod(len(v) for v in space.values()) <= 8  # small, as documented
+    excluded = [c for c in itertools.product(*space.values())
+                if any(all(dict(zip(space, c))[k] == v for k, v in rule.items()) for rule, _ in search_exclude(planner))]
+    assert len(grid(planner)) == math.prod(len(v) for v in space.values()) - len(excluded)
+    assert all(why for _, why in search_exclude(planner))  # each exclusion says why
     assert objective(planner) in ("time", "length")
 
 
@@ -251,3 +256,26 @@ def test_a_planner_from_anywhere_is_tuned_by_the_search_it_declares(monkeypatch)
     assert grid("step") == [{"step": 0.1, "greedy": False}, {"step": 0.1, "greedy": True},
                             {"step": 0.2, "greedy": False}, {"step": 0.2, "greedy": True}]
     assert objective("step") == "length"
+
+
+def test_a_candidate_over_the_offline_bound_is_out_unless_none_is_within():
+    """Step -1: gcs's regions are built by the user, so a default whose worlds take longer than the bound
+    at p90 is out, even when it solves more; with no candidate within the bound the rule goes on."""
+    def off(solved, ratio, p90_s):
+        return dataclasses.replace(_result(solved, 0.3, ratio), offline_p90_s=p90_s, offline_worlds=20)
+
+    rows = [off(9, 1.1, 40.0), off(10, 1.0, 300.0), off(9, 1.05, 110.0)]
+    assert choose(rows, objective="length", weighting="pooled") == 1  # no bound: the most solved
+    explained = choose_explained(rows, objective="length", weighting="pooled", offline_bound_s=120.0)
+    assert explained.index == 2 and explained.over_offline_bound == (1,)
+    assert choose([off(9, 1.0, 300.0), off(10, 1.0, 200.0)], objective="length", weighting="pooled",
+                  offline_bound_s=120.0) == 1  # none within: nothing is left out
+    assert choose([_result(9, 0.3, 1.0)], objective="time", weighting="pooled", offline_bound_s=120.0) == 0  # NaN: none
+
+
+def test_offline_seconds_count_each_world_once():
+    from suite.report.tuning import offline_per_world
+
+    recs = [{"stats": {"world_hash": "a", "offline_s": 30.0}}, {"stats": {"world_hash": "a", "offline_s": 30.0}},
+            {"stats": {"world_hash": "b", "offline_s": 90.0}}, {"stats": {}}, {"stats": None}]
+    assert offline_per_world(recs) == {"a": 30.0, "b": 90.0}
