@@ -269,7 +269,10 @@ def gcs_optimality(problem, rs, *, max_rounded_paths: int = 10, seed: int = 0) -
     cost, the rounded solution's cost, and the global optimum of the same graph problem by
     enumeration (every simple region path's convex restriction). The relaxation gap is
     (rounded - relaxed) / relaxed, as the paper reports it; rounding reached the optimum when the
-    rounded cost is within 0.1% of the enumerated optimum."""
+    rounded cost is within 0.1% of the enumerated optimum. Also the paper's own formulation on the
+    same regions and ends (`suite.paper.paper_regions.linear_gcs`: costs on edges, where `gcs`'s
+    GcsTrajectoryOptimization puts them on vertices): `linear_relaxed_rad`, `linear_rounded_rad`,
+    `linear_gap`, and whether its rounded path passes the validator (`linear_path_valid`)."""
     from planners.gcs_solve import connect_ends, solve_gcs
     from planners.worlds import collision_world
     from suite.scoring.validate import validate_path
@@ -310,4 +313,23 @@ def gcs_optimality(problem, rs, *, max_rounded_paths: int = 10, seed: int = 0) -
     full = np.vstack([[problem.q_start]] * (joined["start_join"] == "segment") + [path]
                      + [[problem.q_goal]] * (joined["goal_join"] == "segment"))
     out["rounded_path_valid"] = validate_path(problem, full, world) is None
+    # The paper's own formulation (LinearGCS: costs on edges) on the same regions and ends.
+    from planners.gcs_regions import quiet_drake
+    from suite.paper.paper_regions import linear_gcs
+
+    t0 = time.perf_counter()
+    with quiet_drake():
+        lin = linear_gcs(A, b, edges, s, g, max_rounded_paths=max_rounded_paths, seed=seed)
+    out["linear_s"] = time.perf_counter() - t0
+    if lin.get("relaxed_rad") is not None and lin.get("rounded_rad") is not None:
+        out["linear_relaxed_rad"] = lin["relaxed_rad"] + ends
+        out["linear_rounded_rad"] = lin["rounded_rad"] + ends
+        out["linear_gap"] = (out["linear_rounded_rad"] - out["linear_relaxed_rad"]) / out["linear_relaxed_rad"]
+        out["linear_rounding_optimal"] = bool(costs) and out["linear_rounded_rad"] <= out["optimum_rad"] * (1 + 1e-3)
+        pts = np.asarray(lin["waypoints"], float)
+        full = np.vstack([[problem.q_start]] * (joined["start_join"] == "segment") + [pts]
+                         + [[problem.q_goal]] * (joined["goal_join"] == "segment"))
+        out["linear_path_valid"] = validate_path(problem, full, world) is None
+    else:
+        out["linear_status"] = [lin.get("relaxation_status"), lin.get("rounded_status")]
     return out

@@ -3,15 +3,26 @@ table beside the paper's findings.
 
 The protocol (`run_protocol`):
 1. Offline, once, cached as data in the dataset's directory: `gcs`'s 8 regions from the scene's
-   hand-placed seeds (`regions/`), and the PRM's roadmap (`roadmaps/`). Their build times are
-   reported apart, never as planning time.
-2. For each of the five tasks, on those regions: the convex relaxation's cost, the rounded cost
-   and the enumerated global optimum (`suite.paper.gcs_arm.gcs_optimality`).
+   hand-placed seeds at the paper's IRIS settings (`PAPER_GCS`; `regions/`), and the PRM's roadmap
+   (`roadmaps/`). Their build times are reported apart, never as planning time. The paper's own 9
+   regions (final generation, converted once to plain arrays: `suite.paper.paper_regions`) are the
+   second region set: written as a region set of this world into OUT/paper-regions/.
+2. For each of the five tasks and each region set: the convex relaxation's cost, the rounded cost
+   and the enumerated global optimum, in `gcs`'s formulation (Drake's GcsTrajectoryOptimization)
+   and in the paper's (LinearGCS) (`suite.paper.gcs_arm.gcs_optimality`); each region set's
+   regions sampled uniformly and judged by the python-fcl world.
 3. `runs` comparison runs (`compare --dataset gcs-arm:tasks`, one worker, run seeds 0, 1, ...) of
-   `gcs`, `prm-roadmap`, `prm-roadmap-shortcut`, `rrt`, `trajopt` and `ik`: every path judged
-   by the suite's validator and certifier, every planner with the same online budget.
-4. Per task and planner: success, path length (rad) and planning time (s) as median and
-   quartiles over the runs; the paper's findings, each held or not (`findings`).
+   `gcs`, `prm-roadmap`, `prm-roadmap-shortcut`, `rrt`, `trajopt` and `ik` (run-K/), and of `gcs`
+   on the paper's regions (run-K-paper/, named `gcs-paper-regions` in the table): every path
+   judged by the suite's validator and certifier, every planner with the same online budget.
+4. Per task and planner: success, path length (rad), planning time and GCS's solver time (s) as
+   median and quartiles over the runs; the paper's findings, each judged with both region sets
+   (`findings`).
+
+Which generation each number is compared with: the paper's regions are the final (Science
+Robotics) generation's (the arXiv v1 regions were never published); its per-task table (`PAPER`)
+is arXiv v1's Fig. 10, whose PRM query is not lazy and whose GCS time counts preprocessing, the
+relaxation and every rounding.
 """
 
 from __future__ import annotations
@@ -27,16 +38,32 @@ from scenes.errors import SuiteError
 
 #: The planners of the protocol: the paper's two (GCS; PRM, plain and shortcut) and the suite's.
 PLANNERS = ("gcs", "prm-roadmap", "prm-roadmap-shortcut", "rrt", "trajopt", "ik")
-#: The paper's IRIS settings mapped onto `gcs`'s options: 10 alternations (its iteration_limit),
-#: no robot-environment padding, a 0.01 rad configuration-space margin; each seed's region grown
-#: on its own, as there. The paper's IrisNp searched for collisions by nonlinear programming and
-#: had no sampled test; IrisNp2's sampled test gets Drake's own defaults (1,000 particles,
-#: epsilon 0.01, delta 0.05, 20 rounds of at most 10 planes), not `gcs`'s faster tuned ones
-#: (200 particles, epsilon 0.05). Chosen before any run on these tasks; everything else is `gcs`'s
-#: tuned setting.
-PAPER_GCS = {"max_iterations": 10, "padding_m": 0.0, "configuration_space_margin_rad": 0.01,
-             "num_particles": 1000, "epsilon": 0.01, "delta": 0.05, "max_iterations_separating_planes": 20,
-             "max_separating_planes_per_iteration": 10}
+#: The paper's IRIS settings mapped onto `gcs`'s options, field by field: the final notebook's
+#: `IrisOptions` (reproduction/prm_comparison/prm_comparison.ipynb at 3d781488; docs/gcs-paper-sources.md
+#: section 7d) -> IrisNp2's field that stands for it:
+#:   iteration_limit = 10                    -> max_iterations = 10
+#:   termination_threshold = -1              -> termination_threshold = -1 (the absolute test off)
+#:   relative_termination_threshold = 0.02   -> relative_termination_threshold = 0.02 (arXiv v1: 0.01)
+#:   require_sample_point_is_contained = True -> require_sample_point_is_contained = True
+#:   random_seed = SEED (0)                  -> random_seed = 0
+#:   configuration_space_margin (unset: 1e-2) -> configuration_space_margin_rad = 0.01
+#:   num_collision_infeasible_samples = 1    -> no counterpart: IrisNp's per-iteration nonlinear search
+#:       for collisions from a few random starts is IrisNp2's sampled statistical test, here at Drake's
+#:       own defaults (1,000 particles, epsilon 0.01, delta 0.05, 20 rounds of at most 10 planes).
+#: No robot-environment padding (the notebook's plant has none); each seed's region grown on its own,
+#: as there (no configuration obstacles). Chosen before any run on these tasks; everything else is
+#: `gcs`'s tuned setting.
+PAPER_IRIS = {"max_iterations": 10, "termination_threshold": -1.0, "relative_termination_threshold": 0.02,
+              "require_sample_point_is_contained": True, "random_seed": 0, "configuration_space_margin_rad": 0.01}
+PAPER_GCS = {**PAPER_IRIS, "padding_m": 0.0, "num_particles": 1000, "epsilon": 0.01, "delta": 0.05,
+             "max_iterations_separating_planes": 20, "max_separating_planes_per_iteration": 10,
+             "max_rounded_paths": 10}  # the paper's rounding: 10 paths (randomForwardPathSearch max_paths)
+#: The region sets GCS can plan on: ours (grown at `PAPER_GCS`) and the paper's stored ones.
+REGION_SETS = ("ours", "paper")
+#: The table's name of `gcs` planning on the paper's regions (the planner is `gcs` in its records).
+GCS_PAPER = "gcs-paper-regions"
+#: `gcs`'s name in the table for each region set.
+GCS_NAMES = {"ours": "gcs", "paper": GCS_PAPER}
 #: The paper's findings (arXiv v1 section 7.4 and Fig. 10, via docs/gcs-paper-sources.md
 #: section 8; its per-task numbers are an unverified third-party transcription).
 PAPER = {
@@ -45,6 +72,9 @@ PAPER = {
     "times_s": {"AS->TS": (0.11, 0.26, 0.61), "TS->CS": (0.01, 0.21, 0.60), "CS->LB": (0.05, 0.20, 0.44),
                 "LB->RB": (0.14, 0.21, 0.51), "RB->AS": (0.08, 0.21, 0.54)},
     "gap_mean": 0.041, "gap_max": 0.130, "regions_s": 53.0, "roadmap_s": 16 * 60.0,
+    "generation": "arXiv v1 (2022): Fig. 10 and section 7.4, via an unverified transcription (gcs-paper-sources.md "
+                  "section 8); GCS time = preprocessing + relaxation + every rounding (MOSEK); PRM time = a non-lazy "
+                  "query (Python over common-robotics-utilities), the shortcut PRM's with TRI's shortcutting",
 }
 
 
@@ -70,26 +100,43 @@ def task_labels(dataset: str) -> dict[str, str]:
     return out
 
 
-def aggregate(run_dirs: list[Path], labels: dict[str, str]) -> dict[str, dict[str, Any]]:
+def aggregate(run_dirs: list[Path], labels: dict[str, str], *, rename: dict[str, str] | None = None
+              ) -> dict[str, dict[str, Any]]:
     """Per task and planner over the runs' records: runs, successes, certified, and the
-    quartiles of the successes' length (rad) and of every run's planning time (s)."""
+    quartiles of the successes' length (rad), of every run's planning time (s) and, for `gcs`, of
+    its GCS solver time (s: `stats.gcs_solve_s`, every GCS solve of the query: Drake's
+    preprocessing, the relaxation and the rounded solves, repairs' solves included). `rename` maps
+    a record's planner to the table's name (`gcs` on the paper's regions)."""
     from suite.run.records import read_trials
 
     cells: dict[tuple[str, str], list[dict]] = {}
     for d in run_dirs:
         for r in read_trials(d):
-            cells.setdefault((labels.get(r["problem_id"], r["problem_id"]), r["planner"]), []).append(r)
+            name = (rename or {}).get(r["planner"], r["planner"])
+            cells.setdefault((labels.get(r["problem_id"], r["problem_id"]), name), []).append(r)
     out: dict[str, dict[str, Any]] = {}
     for (task, planner), recs in sorted(cells.items()):
         ok = [r for r in recs if r["status"] == "success"]
+        solver = [float(r["stats"]["gcs_solve_s"]) for r in recs if (r.get("stats") or {}).get("gcs_solve_s") is not None]
         out.setdefault(task, {})[planner] = {
             "runs": len(recs), "successes": len(ok),
             "certified": sum((r.get("certification") or {}).get("verdict") == "certified" for r in ok),
             "length_rad": _quartiles([float(r["metrics"]["path_length_rad"]) for r in ok]),
             "time_s": _quartiles([float(r["planning_time_s"]) for r in recs if r.get("planning_time_s") is not None]),
+            "solver_s": _quartiles(solver),
+            "repairs": sum(int((r.get("stats") or {}).get("repairs", 0)) for r in recs),
+            "num_regions": sorted({r["stats"]["num_regions"] for r in recs if (r.get("stats") or {}).get("num_regions")}),
             "offline_s": next((r["stats"].get("offline_s") for r in recs if (r.get("stats") or {}).get("offline_s")), None),
             "failures": sorted({str(r.get("reason_code")) for r in recs if r["status"] != "success"}),
         }
+    return out
+
+
+def merge_tables(*tables: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    out: dict[str, dict[str, Any]] = {}
+    for t in tables:
+        for task, by in t.items():
+            out.setdefault(task, {}).update(by)
     return out
 
 
@@ -99,47 +146,84 @@ def _med(cell: dict | None, what: str) -> float | None:
     return cell[what]["median"]
 
 
-def findings(table: dict[str, dict[str, Any]], optimality: dict[str, dict], offline: dict[str, float]) -> list[dict]:
-    """The paper's four findings, each with what we measured and whether it held here."""
+def _pct(x: float) -> str:
+    return f"{100 * x:.1f}%"
+
+
+def findings(table: dict[str, dict[str, Any]], optimality: dict[str, dict[str, dict]], offline: dict[str, Any]
+             ) -> list[dict]:
+    """The paper's four findings, each judged with each region set of `optimality` (`ours`,
+    `paper`): per set what we measured and whether it held here (True, False; None: measured
+    only, or not comparable)."""
     tasks = [t for t in PAPER["lengths_rad"] if t in table]
-    solved = [t for t in tasks if (table[t].get("gcs") or {}).get("successes")]
-    unsolved = f"; GCS solved {len(solved)} of {len(tasks)} tasks" if len(solved) < len(tasks) else ""
-    out = []
-    shorter = []
-    for t in solved:
-        g, p, s = (_med(table[t].get(n), "length_rad") for n in ("gcs", "prm-roadmap", "prm-roadmap-shortcut"))
-        shorter.append(all(x is None or g < x for x in (p, s)))
-    out.append({"finding": "in all five tasks GCS's path is shorter than both PRMs'",
-                "here": f"shorter than both in {sum(shorter)} of the {len(solved)} tasks GCS solved (medians){unsolved}",
-                "held": len(solved) == len(tasks) and all(shorter)})
-    faster, slower = [], []
-    for t in tasks:
-        g, p, s = (_med(table[t].get(n), "time_s") for n in ("gcs", "prm-roadmap", "prm-roadmap-shortcut"))
-        if t in solved and None not in (g, p):
-            faster.append(g < p)
-        if None not in (p, s):
-            slower.append(s > 1.5 * p)
-    out.append({"finding": "GCS's runtime is below the plain PRM's; the shortcut PRM's is significantly larger",
-                "here": f"GCS faster than the plain PRM in {sum(faster)} of the {len(faster)} tasks it solved; the shortcut "
-                        f"PRM over 1.5x the plain PRM's time in {sum(slower)} of {len(slower)} tasks",
-                "held": len(faster) == len(tasks) and all(faster) and all(slower)})
-    gaps = [o["relaxation_gap"] for o in optimality.values() if o.get("relaxation_gap") is not None]
-    opt = [o.get("rounding_optimal") for o in optimality.values() if o.get("connected")]
-    here = (f"rounding reached the enumerated optimum in {sum(bool(x) for x in opt)} of the {len(opt)} tasks whose ends "
-            f"the regions link ({len(optimality)} tasks); gap mean {100 * statistics.mean(gaps):.1f}%, max "
-            f"{100 * max(gaps):.1f}%" if gaps else "no task's ends are linked by the regions")
-    out.append({"finding": "the rounded GCS solution is the global optimum in every task; the relaxation gap averages "
-                           "4.1%, at most 13.0%",
-                "here": here, "held": len(opt) == len(optimality) and all(bool(x) for x in opt)})
-    out.append({"finding": "offline: regions in 53 s (parallel), roadmap of 15,000 samples in 16 min",
-                "here": f"regions {offline.get('regions_s', float('nan')):.0f} s (one thread), roadmap of "
-                        f"{offline.get('roadmap_milestones', 0)} milestones {offline.get('roadmap_s', float('nan')):.0f} s",
-                "held": None})
+    sets = [k for k in REGION_SETS if k in optimality]
+    f1, f2, f3 = [], [], []
+    for rs in sets:
+        gname = GCS_NAMES[rs]
+        solved = [t for t in tasks if (table[t].get(gname) or {}).get("successes")]
+        unsolved = f"; GCS solved {len(solved)} of {len(tasks)} tasks" if len(solved) < len(tasks) else ""
+        shorter = []
+        for t in solved:
+            g, p, s = (_med(table[t].get(n), "length_rad") for n in (gname, "prm-roadmap", "prm-roadmap-shortcut"))
+            shorter.append(all(x is None or g < x for x in (p, s)))
+        f1.append({"regions": rs, "held": len(solved) == len(tasks) and all(shorter),
+                   "here": f"shorter than both in {sum(shorter)} of the {len(solved)} tasks GCS solved (medians: "
+                           + ", ".join(f"{_med(table[t].get(gname), 'length_rad'):.2f}" for t in solved)
+                           + f" rad){unsolved}"})
+        faster, slower, solver_s = [], [], []
+        for t in tasks:
+            g = _med(table[t].get(gname), "solver_s")
+            p, s = (_med(table[t].get(n), "time_s") for n in ("prm-roadmap", "prm-roadmap-shortcut"))
+            if t in solved and None not in (g, p):
+                faster.append(g < p)
+                solver_s.append(g)
+            if None not in (p, s):
+                slower.append(s > 1.5 * p)
+        span = f" (GCS solver {min(solver_s):.3f}-{max(solver_s):.3f} s)" if solver_s else ""
+        f2.append({"regions": rs, "held": len(faster) == len(tasks) and all(faster) and all(slower),
+                   "here": f"GCS's solver time below the plain PRM's query time in {sum(faster)} of the {len(faster)} "
+                           f"tasks it solved{span}; the shortcut PRM over 1.5x the plain PRM's time in {sum(slower)} "
+                           f"of {len(slower)} tasks"})
+        opt = optimality[rs]
+        linked = [o for o in opt.values() if o.get("connected")]
+        parts = []
+        for key, label in (("linear", "the paper's formulation (LinearGCS, edge costs)"),
+                           ("", "Drake's GcsTrajectoryOptimization (vertex costs)")):
+            pre = f"{key}_" if key else ""
+            gaps = [o[f"{pre}gap" if key else "relaxation_gap"] for o in linked
+                    if o.get(f"{pre}gap" if key else "relaxation_gap") is not None]
+            reached = sum(bool(o.get(f"{pre}rounding_optimal")) for o in linked)
+            invalid = [t for t, o in opt.items() if o.get(f"{pre}path_valid" if key else "rounded_path_valid") is False]
+            parts.append(f"{label}: rounding reached the enumerated optimum in {reached} of {len(linked)} tasks; gap "
+                         + (f"mean {_pct(statistics.mean(gaps))}, max {_pct(max(gaps))}" if gaps else "-")
+                         + (f"; its rounded (= optimum) path collides in our world in {', '.join(invalid)}" if invalid else ""))
+        unl = f"; the regions link the ends of {len(linked)} of {len(opt)} tasks" if len(linked) < len(opt) else ""
+        f3.append({"regions": rs, "here": "; ".join(parts) + unl,
+                   "held": len(linked) == len(opt) and all(bool(o.get("linear_rounding_optimal")) for o in linked)})
+    out = [
+        {"finding": "in all five tasks GCS's path is shorter than both PRMs'", "by_regions": f1},
+        {"finding": "GCS's runtime is below the plain PRM's; the shortcut PRM's is significantly larger (arXiv v1: "
+                    "GCS = MOSEK's preprocessing + relaxation + all roundings; PRM = a non-lazy query)", "by_regions": f2},
+        {"finding": "the rounded GCS solution is the global optimum in every task; the relaxation gap averages 4.1%, "
+                    "at most 13.0% (the paper's formulation, LinearGCS)", "by_regions": f3},
+    ]
+    ours_s = offline.get("regions_s")
+    out.append({"finding": "offline: regions in 53 s (parallel), roadmap of 15,000 samples in 16 min", "by_regions": [
+        {"regions": "ours", "held": None,
+         "here": (f"our 8 regions {ours_s:.0f} s (one thread) at the paper's IRIS settings; " if ours_s else "")
+                 + f"roadmap of {offline.get('roadmap_milestones', 0)} milestones {offline.get('roadmap_s', float('nan')):.0f} s"},
+        {"regions": "paper", "held": None, "here": "the paper's regions are loaded (their build time is not published)"}]})
     return out
 
 
-def table_markdown(table: dict, optimality: dict, facts: list[dict], *, runs: int) -> str:
-    """The per-task table (ours beside the paper's numbers) and the findings."""
+def _flt(o: dict, k: str, fmt: str = "{:.3f}") -> str:
+    return fmt.format(o[k]) if o.get(k) is not None else "-"
+
+
+def table_markdown(table: dict, optimality: dict[str, dict], facts: list[dict], *, runs: int,
+                   regions: dict[str, Any] | None = None) -> str:
+    """The per-task table (ours beside the paper's numbers), GCS on each region set, the regions
+    and the findings."""
     def cell(c, what, fmt):
         if not c or not c.get(what):
             return "-"
@@ -148,40 +232,62 @@ def table_markdown(table: dict, optimality: dict, facts: list[dict], *, runs: in
 
     lines = [f"Median [quartiles] over {runs} runs per task; solved = paths the validator passes (and how many of "
              "them the exact check certifies, where fewer); length in rad (sum of joint-space steps) over the "
-             "solved runs; time = the suite's planning time in s over all runs (offline work excluded). `paper` = "
-             "the paper's Fig. 10 bars (GCS / PRM / shortcut PRM).", ""]
-    head = "| task | planner | solved | length (rad) | time (s) |"
-    lines += [head, "|---|---|---|---|---|"]
+             "solved runs; time = the suite's planning time in s over all runs (offline work excluded); GCS solver "
+             f"= `gcs`'s GCS solves alone (s). `{GCS_PAPER}` = `gcs` on the paper's own 9 regions (final generation). "
+             "`paper` = arXiv v1's Fig. 10 (GCS / PRM / shortcut PRM; GCS time: MOSEK's preprocessing, relaxation "
+             "and all roundings; PRM: a non-lazy query). The shortcut PRM here is OMPL's full PathSimplifier "
+             "(shortcuts and B-spline smoothing), stronger than the paper's shortcutting.", ""]
+    names = ("gcs", GCS_PAPER) + PLANNERS[1:]
+    lines += ["| task | planner | solved | length (rad) | time (s) | GCS solver (s) |", "|---|---|---|---|---|---|"]
     for task, by in table.items():
-        for planner in PLANNERS:
+        for planner in names:
             c = by.get(planner)
             if c is None:
                 continue
             cert = "" if c["certified"] == c["successes"] else f" ({c['certified']} certified)"
             lines.append(f"| {task} | {planner} | {c['successes']}/{c['runs']}{cert} | {cell(c, 'length_rad', '{:.2f}')} | "
-                         f"{cell(c, 'time_s', '{:.3f}')} |")
+                         f"{cell(c, 'time_s', '{:.3f}')} | {cell(c, 'solver_s', '{:.3f}')} |")
         if task in PAPER["lengths_rad"]:
             L, T = PAPER["lengths_rad"][task], PAPER["times_s"][task]
-            lines.append(f"| {task} | paper | - | {L[0]} / {L[1]} / {L[2]} | {T[0]} / {T[1]} / {T[2]} |")
-    lines += ["", "GCS on the cached regions (no online repair):", "",
-              "| task | ends joined | relaxed (rad) | rounded (rad) | optimum (rad) | gap | rounding optimal | rounded path valid |",
-              "|---|---|---|---|---|---|---|---|"]
-    for task, o in optimality.items():
-        f = (lambda k: f"{o[k]:.3f}" if o.get(k) is not None else "-")
-        gap = f"{abs(100 * o['relaxation_gap']):.1f}%" if o.get("relaxation_gap") is not None else "-"
-        lines.append(f"| {task} | {o['start_join']} / {o['goal_join']} | {f('relaxed_rad')} | {f('rounded_rad')} | "
-                     f"{f('optimum_rad')} | {gap} | {o.get('rounding_optimal', '-')} | {o.get('rounded_path_valid', '-')} |")
-    lines += ["", "| | finding | held here |", "|---|---|---|"]
+            lines.append(f"| {task} | paper | - | {L[0]} / {L[1]} / {L[2]} | {T[0]} / {T[1]} / {T[2]} | {T[0]} |")
+    for rs, opt in optimality.items():
+        lines += ["", f"GCS on {'our regions' if rs == 'ours' else 'the paper regions'} (no online repair), in Drake's "
+                  "formulation (`gcs`: GcsTrajectoryOptimization, vertex costs) and in the paper's (LinearGCS, edge "
+                  "costs); optimum = the enumerated global optimum of the same graph problem (both formulations share it):", "",
+                  "| task | ends joined | optimum (rad) | relaxed / rounded (rad), ours | gap | rounded = optimum | rounded path valid | "
+                  "relaxed / rounded (rad), LinearGCS | gap | rounded = optimum | rounded path valid |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
+        for task, o in opt.items():
+            gap = _pct(abs(o["relaxation_gap"])) if o.get("relaxation_gap") is not None else "-"
+            lgap = _pct(abs(o["linear_gap"])) if o.get("linear_gap") is not None else "-"
+            lines.append(f"| {task} | {o['start_join']} / {o['goal_join']} | {_flt(o, 'optimum_rad')} | "
+                         f"{_flt(o, 'relaxed_rad')} / {_flt(o, 'rounded_rad')} | {gap} | {o.get('rounding_optimal', '-')} | "
+                         f"{o.get('rounded_path_valid', '-')} | {_flt(o, 'linear_relaxed_rad')} / {_flt(o, 'linear_rounded_rad')} | "
+                         f"{lgap} | {o.get('linear_rounding_optimal', '-')} | {o.get('linear_path_valid', '-')} |")
+    if regions:
+        lines += ["", "The regions: uniform samples of each (hit-and-run) judged by the python-fcl world; for ours, "
+                  "what IRIS did (from Drake's log):", "",
+                  "| set | region | faces | samples in collision | IRIS iterations | stopped by | inscribed radius (rad) | build (s) |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for rs, rows in regions.items():
+            for name, r in rows.items():
+                lines.append(f"| {rs} | {name} | {r['faces']} | {r['collide']}/{r['samples']} ({_pct(r['fraction'])}) | "
+                             f"{r.get('iterations', '-')} | {', '.join(r.get('stop', [])) or '-'} | "
+                             f"{_flt(r, 'radius_rad', '{:.2f}')} | {_flt(r, 'build_s', '{:.1f}')} |")
+    lines += ["", "| | regions | finding | held here |", "|---|---|---|---|"]
     for f in facts:
-        mark = {True: "held", False: "not held", None: "(measured)"}[f["held"]]
-        lines.append(f"| paper | {f['finding']} | |")
-        lines.append(f"| here | {f['here']} | {mark} |")
+        lines.append(f"| paper | | {f['finding']} | |")
+        for h in f["by_regions"]:
+            mark = {True: "held", False: "not held", None: "(measured)"}[h["held"]]
+            lines.append(f"| here | {h['regions']} | {h['here']} | {mark} |")
     return "\n".join(lines) + "\n"
 
 
-def plot_paths(run_dir: Path, labels: dict[str, str], out: Path, *, planners=("gcs", "prm-roadmap")) -> Path:
+def plot_paths(runs: list[tuple[Path, dict[str, str]]], labels: dict[str, str], out: Path, *,
+               planners=("gcs", GCS_PAPER, "prm-roadmap")) -> Path:
     """The gripper's paths of each task (first run) for `planners` over the scene, top and side
-    views, one colour per task (solid GCS, dashed PRM): the paper's Fig. 9 in two projections."""
+    views, one colour per task (solid `gcs` on our regions, dotted on the paper's, dashed PRM): the
+    paper's Fig. 9 in two projections. `runs`: (run directory, planner renames) pairs."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -197,14 +303,14 @@ def plot_paths(run_dir: Path, labels: dict[str, str], out: Path, *, planners=("g
 
     scene = paper_scene()
     robot = load_robot(scene.spec.robot)
-    recs = read_trials(run_dir)
-    fig, axes = plt.subplots(1, 2, figsize=(13, 6.2))
+    recs = [{**r, "planner": rename.get(r["planner"], r["planner"])} for d, rename in runs for r in read_trials(d)]
+    fig, axes = plt.subplots(1, 2, figsize=(13, 6.6))
     for ax, dims in zip(axes, ((0, 1), (1, 2))):
         for o in scene_outlines(scene.spec, (), dims=dims):
             if o.kind != "plate":  # the spec's plate is buried in the table: no geometry of its own
                 ax.add_patch(Polygon(o.xy_m, closed=True, **OUTLINE_STYLES[o.kind]))
     colors = plt.get_cmap("tab10")
-    styles = {planners[0]: "-", planners[1]: "--"}
+    styles = dict(zip(planners, ("-", ":", "--")))
     for k, (a, b) in enumerate(TASKS):
         label = task_label(a, b)
         for planner in planners:
@@ -214,7 +320,7 @@ def plot_paths(run_dir: Path, labels: dict[str, str], out: Path, *, planners=("g
                 continue
             p = robot.gripper_pose(densify_joint_path(np.asarray(r["path"], float)))[:, :3, 3]
             for ax, (i, j) in zip(axes, ((0, 1), (1, 2))):
-                ax.plot(p[:, i], p[:, j], styles[planner], color=colors(k), linewidth=1.6,
+                ax.plot(p[:, i], p[:, j], styles[planner], color=colors(k), linewidth=1.8 if styles[planner] == ":" else 1.4,
                         label=f"{label} {planner}" if ax is axes[0] else None)
     axes[0].set(xlabel="x (m)", ylabel="y (m)", title="Top view")
     axes[1].set(xlabel="y (m)", ylabel="z (m)", title="Side view (from +x)")
@@ -222,9 +328,9 @@ def plot_paths(run_dir: Path, labels: dict[str, str], out: Path, *, planners=("g
         ax.set_aspect("equal")
         ax.autoscale_view()
     fig.legend(loc="lower center", ncol=5, fontsize=8, frameon=False)
-    fig.suptitle("Gripper paths of GCS (solid) and the fixed-roadmap PRM (dashed) on the GCS paper's five tasks "
-                 "(first run; shelves and bins hatched/green)")
-    fig.subplots_adjust(bottom=0.16)
+    fig.suptitle("Gripper paths on the GCS paper's five tasks (first run): GCS on our regions (solid), on the paper's "
+                 "regions (dotted),\nthe fixed-roadmap PRM (dashed); shelves and bins hatched/green")
+    fig.subplots_adjust(bottom=0.2)
     fig.savefig(out, dpi=120)
     plt.close(fig)
     return out
@@ -250,68 +356,145 @@ def offline_work(dataset: str, problem, *, rebuild: bool = False) -> tuple[dict[
         (d / "roadmaps" / f"{roadmap_key(problem, rm_cfg)}.npz").unlink(missing_ok=True)
     rm, rm_cache = roadmap_for(problem, rm_cfg)
     return {"regions": len(rs), "region_edges": len(rs.edges) // 2, "regions_s": rs.offline_s,
-            "regions_cache": info["cache"], "roadmap_milestones": len(rm.milestones),
+            "regions_cache": info["cache"], "regions_file": Path(info["path"]).name, "region_build_s": rs.region_build_s,
+            "roadmap_milestones": len(rm.milestones),
             "roadmap_edges": len(rm.edges), "roadmap_seeded": rm.seeded, "roadmap_s": rm.offline_s,
             "roadmap_cache": rm_cache}, rs
 
 
+def our_region_rows(problem, rs) -> dict[str, dict]:
+    """Per region of our set, named by its scene seed: faces, IRIS iterations and stop reason,
+    inscribed radius, build time, and its collision fraction (`collision_fractions`)."""
+    from planners.gcs_cover import scene_seeds
+    from suite.paper.paper_regions import collision_fractions
+
+    named, _ = scene_seeds(problem)
+    names = []
+    for q in rs.seeds:
+        names.append(next((n for n, s in named if np.allclose(s, q, atol=1e-9)), f"r{len(names)}"))
+    frac = collision_fractions(problem, names, list(rs.A), list(rs.b))
+    out = {}
+    for k, name in enumerate(names):
+        iris = rs.region_iris[k] if k < len(rs.region_iris) else {}
+        out[name] = {**frac[name], **{key: iris.get(key) for key in ("iterations", "stop", "volume", "radius_rad")},
+                     "build_s": rs.region_build_s[k] if k < len(rs.region_build_s) else None}
+    return out
+
+
+def paper_region_rows(problem) -> dict[str, dict]:
+    """Per paper region: faces, collision fraction, inscribed radius."""
+    from planners.gcs_regions import inscribed_volume
+    from suite.paper.paper_regions import collision_fractions, load_paper_regions
+
+    names, A, b = load_paper_regions()
+    frac = collision_fractions(problem, names, A, b)
+    return {n: {**frac[n], **inscribed_volume(a, c)} for n, a, c in zip(names, A, b)}
+
+
+def parse_region_sets(text: str) -> tuple[str, ...]:
+    """"ours", "paper" or "both" -> the region sets GCS plans on."""
+    if text == "both":
+        return REGION_SETS
+    if text not in REGION_SETS:
+        raise SuiteError(f"--regions {text!r}; allowed: ours, paper, both")
+    return (text,)
+
+
 def run_protocol(out: Path, *, dataset: str = "gcs-arm", runs: int = 10, time_limit_s: float = 5.0,
-                 jobs: int = 1, rebuild: bool = False, progress: bool = True) -> dict[str, Any]:
-    """The whole protocol (module docstring) into directory `out`: run-K/ per comparison run,
-    paper.json, table.md and paths.png. A run already complete in `out` is kept (resumed)."""
+                 jobs: int = 1, rebuild: bool = False, progress: bool = True,
+                 regions: tuple[str, ...] = REGION_SETS) -> dict[str, Any]:
+    """The whole protocol (module docstring) into directory `out`: run-K/ (and run-K-paper/) per
+    comparison run, paper.json, table.md and paths.png, GCS planning on each region set of
+    `regions` ("ours", "paper"). A run already complete in `out` is kept (resumed)."""
     import sys
 
     import yaml
 
+    from planners.gcs import GcsPlanner
     from suite.cli import main as suite_main
     from suite.paper.gcs_arm import TASKS, gcs_optimality, task_label
+    from suite.paper.paper_regions import paper_region_set
     from suite.problems.dataset import load_dataset
+    from suite.run.trial import make_config
 
+    for r in regions:
+        if r not in REGION_SETS:
+            raise SuiteError(f"region set {r!r}; allowed: {', '.join(REGION_SETS)}")
     out.mkdir(parents=True, exist_ok=True)
     labels = task_labels(dataset)
     ds = load_dataset(f"{dataset}:tasks")
-    off, rs = offline_work(dataset, ds.problems[0], rebuild=rebuild)
-    optimality = {labels[pid]: gcs_optimality(p, rs) for pid, p in zip(ds.ids, ds.problems)}
+    problem = ds.problems[0]
+    off, ours = offline_work(dataset, problem, rebuild=rebuild)
+    sets = {}
+    if "ours" in regions:
+        sets["ours"] = ours
+    paper_dir = out / "paper-regions"
+    if "paper" in regions:
+        # the paper's regions as the region set of this world at `gcs`'s settings: `gcs` finds it in
+        # `regions_dir` before our set of the same name in the dataset's regions/
+        sets["paper"] = paper_region_set(problem, make_config(GcsPlanner, PAPER_GCS).region_options())
+        for stale in paper_dir.glob("*.npz"):
+            stale.unlink()
+        sets["paper"].save(paper_dir / f"{sets['paper'].world_hash}.npz")
+    optimality = {k: {labels[pid]: gcs_optimality(p, rs) for pid, p in zip(ds.ids, ds.problems)} for k, rs in sets.items()}
+    region_rows = {}
+    if "ours" in sets:
+        region_rows["ours"] = our_region_rows(problem, ours)
+    if "paper" in sets:
+        region_rows["paper"] = paper_region_rows(problem)
     # gcs and the PRMs find the regions and the roadmap in the dataset's directory themselves (no
-    # path in the settings: a trial's id must not depend on where the checkout lies)
+    # path in the settings: a trial's id must not depend on where the checkout lies); the paper's
+    # regions are in OUT/paper-regions (its path, as given, is in those trials' settings)
     config = {"planner_configs": {"gcs": dict(PAPER_GCS)}}
     (out / "config.yaml").write_text(yaml.safe_dump(config))
-    run_dirs = []
+    paper_config = {"planner_configs": {"gcs": {**PAPER_GCS, "regions_dir": str(paper_dir), "build_regions": False}}}
+    (out / "config-paper-regions.yaml").write_text(yaml.safe_dump(paper_config))
+    main_planners = [p for p in PLANNERS if p != "gcs" or "ours" in regions]
+    run_dirs, paper_dirs = [], []
     for k in range(runs):
-        rd = out / f"run-{k}"
-        argv = ["compare", "--dataset", f"{dataset}:tasks", "--planners", ",".join(PLANNERS), "--seed", str(k),
-                "--jobs", str(jobs), "--time-limit-s", str(time_limit_s), "--config", str(out / "config.yaml"),
-                "--out", str(rd)]
-        if (rd / "trials.jsonl").exists():
-            argv.append("--resume")
-        if progress:
-            print(f"run {k + 1}/{runs}: python -m suite {' '.join(argv)}", file=sys.stderr, flush=True)
-        code = suite_main(argv + ([] if progress else ["--no-progress"]))
-        if code not in (0, None):
-            raise SuiteError(f"comparison run {k} failed (exit code {code}); its directory: {rd}")
-        run_dirs.append(rd)
-    table = aggregate(run_dirs, labels)
+        for rd, planners, cfg in ((out / f"run-{k}", main_planners, out / "config.yaml"),
+                                  (out / f"run-{k}-paper", ["gcs"] if "paper" in regions else [],
+                                   out / "config-paper-regions.yaml")):
+            if not planners:
+                continue
+            argv = ["compare", "--dataset", f"{dataset}:tasks", "--planners", ",".join(planners), "--seed", str(k),
+                    "--jobs", str(jobs), "--time-limit-s", str(time_limit_s), "--config", str(cfg), "--out", str(rd)]
+            if (rd / "trials.jsonl").exists():
+                argv.append("--resume")
+            if progress:
+                print(f"run {k + 1}/{runs}: python -m suite {' '.join(argv)}", file=sys.stderr, flush=True)
+            code = suite_main(argv + ([] if progress else ["--no-progress"]))
+            if code not in (0, None):
+                raise SuiteError(f"comparison run {k} failed (exit code {code}); its directory: {rd}")
+            (paper_dirs if rd.name.endswith("-paper") else run_dirs).append(rd)
+    table = merge_tables(aggregate(run_dirs, labels), aggregate(paper_dirs, labels, rename={"gcs": GCS_PAPER}))
+    for task, by in table.items():  # gcs must have planned on the paper's 9 regions, not found ours
+        if GCS_PAPER in by and by[GCS_PAPER]["num_regions"] not in ([], [len(sets["paper"])]):
+            raise SuiteError(f"{task}: gcs on the paper's regions planned on {by[GCS_PAPER]['num_regions']} regions, "
+                             f"not the paper's {len(sets['paper'])}")
     table = {task_label(a, b): table[task_label(a, b)] for a, b in TASKS if task_label(a, b) in table}
     facts = findings(table, optimality, off)
-    ours = verdicts_with_our_robot(run_dirs, labels)
-    report = {"dataset": dataset, "runs": runs, "time_limit_s": time_limit_s, "offline": off,
-              "gcs_optimality": optimality, "table": table, "findings": facts, "paper": PAPER,
-              "gcs_settings": PAPER_GCS, "verdicts_with_our_robot": ours}
+    runs_all = [(d, {}) for d in run_dirs] + [(d, {"gcs": GCS_PAPER}) for d in paper_dirs]
+    ours_model = verdicts_with_our_robot(runs_all, labels)
+    report = {"dataset": dataset, "runs": runs, "time_limit_s": time_limit_s, "region_sets": list(regions),
+              "offline": off, "gcs_optimality": optimality, "regions": region_rows, "table": table,
+              "findings": facts, "paper": PAPER, "gcs_settings": PAPER_GCS, "paper_iris": PAPER_IRIS,
+              "verdicts_with_our_robot": ours_model}
     (out / "paper.json").write_text(json.dumps(report, indent=1, default=float) + "\n")
-    text = table_markdown(table, optimality, facts, runs=runs)
+    text = table_markdown(table, optimality, facts, runs=runs, regions=region_rows)
     text += ("\nThe same successes judged with the project's own robot model (capsules, the WSG's fingers "
              "open) in the same scene:\n\n| planner | successes | valid with our model |\n|---|---|---|\n"
-             + "".join(f"| {p} | {c['successes']} | {c['valid_with_ours']} |\n" for p, c in sorted(ours.items())))
+             + "".join(f"| {p} | {c['successes']} | {c['valid_with_ours']} |\n" for p, c in sorted(ours_model.items())))
     (out / "table.md").write_text(text)
-    plot_paths(run_dirs[0], labels, out / "paths.png")
+    plot_paths(runs_all[:1] + [x for x in runs_all if x[0].name == "run-0-paper"], labels, out / "paths.png")
     return report
 
 
-def verdicts_with_our_robot(run_dirs: list[Path], labels: dict[str, str]) -> dict[str, dict[str, int]]:
-    """Every success of the runs judged again with the project's own robot model (`iiwa14-wsg`:
-    capsules, the WSG's fingers open) in the same scene: per planner, successes and how many of
-    them that validator still passes. The paper's model is the scene's own; this says how much
-    the verdicts depend on it."""
+def verdicts_with_our_robot(runs: list[tuple[Path, dict[str, str]]], labels: dict[str, str]) -> dict[str, dict[str, int]]:
+    """Every success of the runs ((run directory, planner renames) pairs) judged again with the
+    project's own robot model (`iiwa14-wsg`: capsules, the WSG's fingers open) in the same scene:
+    per planner, successes and how many of them that validator still passes. The paper's model is
+    the scene's own; this says how much the verdicts depend on it."""
     import dataclasses
 
     from planners.worlds import collision_world
@@ -326,12 +509,12 @@ def verdicts_with_our_robot(run_dirs: list[Path], labels: dict[str, str]) -> dic
     ds = load_dataset("gcs-arm:tasks")
     problems = {pid: p.with_(scene=ours) for pid, p in zip(ds.ids, ds.problems)}
     out: dict[str, dict[str, int]] = {}
-    for d in run_dirs:
+    for d, rename in runs:
         for r in read_trials(d):
             if r["status"] != "success" or not r.get("path") or r["problem_id"] not in problems:
                 continue
             p = problems[r["problem_id"]]
-            cell = out.setdefault(r["planner"], {"successes": 0, "valid_with_ours": 0})
+            cell = out.setdefault(rename.get(r["planner"], r["planner"]), {"successes": 0, "valid_with_ours": 0})
             cell["successes"] += 1
             cell["valid_with_ours"] += validate_path(p, np.asarray(r["path"], float), collision_world(p)) is None
     return out
