@@ -162,6 +162,7 @@ class GcsPlanner(PlannerBase):
             "regions_added": info["regions_added"],
             "num_regions": 0 if rs is None else len(rs),
             "offline_s": 0.0 if rs is None else rs.offline_s,
+            "offline_cpu_s": None if rs is None else rs.offline_cpu_s,
         }
         if rs is None or len(rs) == 0:
             stats["reason"] = "no regions for this world"

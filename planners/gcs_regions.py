@@ -315,7 +315,7 @@ def grow_for_problem(rs: RegionSet, problem, builder: RegionBuilder) -> int:
     """Grow `rs` until it covers the problem's start and goal and connects them (or the
     problem's region budget runs out). Returns the number of regions added."""
     o = builder.options
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     n0 = len(rs)
     q0, q1 = np.asarray(problem.q_start, float), np.asarray(problem.q_goal, float)
     added = 0
@@ -374,6 +374,7 @@ def grow_for_problem(rs: RegionSet, problem, builder: RegionBuilder) -> int:
     if key not in rs.checked:
         rs.checked.append(key)
     rs.offline_s += time.perf_counter() - t0
+    rs.offline_cpu_s = (rs.offline_cpu_s or 0.0) + time.process_time() - c0
     return added
 
 
@@ -419,7 +420,7 @@ def grow_for_world(rs: RegionSet, problem, builder: RegionBuilder) -> dict:
     from planners.worlds import planning_world
 
     o = builder.options
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     world = planning_world(problem)
     if problem.scene.spec.region_seeds is not None:  # the scene's own hand-placed seeds
         chain = None
@@ -467,7 +468,9 @@ def grow_for_world(rs: RegionSet, problem, builder: RegionBuilder) -> dict:
         rs.checked.append(WORLD_BUILT)
     info["regions"] = len(rs)
     rs.offline_s += time.perf_counter() - t0
+    rs.offline_cpu_s = (rs.offline_cpu_s or 0.0) + time.process_time() - c0
     info["offline_s"] = rs.offline_s
+    info["offline_cpu_s"] = rs.offline_cpu_s
     return info
 
 

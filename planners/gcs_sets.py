@@ -243,6 +243,9 @@ class RegionSet:
         seeds: (k, 7) the configuration each region was grown from.
         region_build_s: per region, wall time of its IRIS call (s).
         offline_s: total wall time spent building this set (IRIS, guide paths, checks), s.
+        offline_cpu_s: the CPU time of the building process over the same work, s (one IRIS
+            thread: the wall time the build takes on a core of its own, whatever else the machine
+            ran; None for sets built before it was recorded).
         problems: problem hashes (start, goal) this set was grown for.
         edges: directed pairs (i, j) of intersecting regions (both directions listed).
         iris: the algorithm.
@@ -268,6 +271,7 @@ class RegionSet:
     iris: str = "np2"
     checked: list[str] = dataclasses.field(default_factory=list)
     region_iris: list[dict] = dataclasses.field(default_factory=list)
+    offline_cpu_s: float | None = None
 
     def __len__(self) -> int:
         return len(self.A)
@@ -296,7 +300,7 @@ class RegionSet:
         sizes = np.array([len(b) for b in self.b], int)
         meta = {"format": FORMAT_VERSION, "world_hash": self.world_hash, "offline_s": self.offline_s,
                 "problems": self.problems, "iris": self.iris, "region_build_s": self.region_build_s,
-                "verified": self.checked, "region_iris": self.region_iris}
+                "verified": self.checked, "region_iris": self.region_iris, "offline_cpu_s": self.offline_cpu_s}
         save_npz_atomically(
             path, sizes=sizes,
             A=np.concatenate(self.A) if self.A else np.zeros((0, 7)),
@@ -318,7 +322,7 @@ class RegionSet:
             return cls(meta["world_hash"], list(A), list(b), list(z["seeds"]), list(meta["region_build_s"]),
                        float(meta["offline_s"]), list(meta["problems"]),
                        [tuple(map(int, e)) for e in z["edges"]], meta["iris"], list(meta.get("verified", [])),
-                       list(meta.get("region_iris", [])))
+                       list(meta.get("region_iris", [])), meta.get("offline_cpu_s"))
 
 
 def problem_hash(problem, *, rule: str = CURRENT_RULE) -> str:

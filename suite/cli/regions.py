@@ -92,6 +92,7 @@ def _build_world(payload: tuple) -> dict:
         "A": [a.tolist() for a in rs.A], "b": [x.tolist() for x in rs.b], "seeds": [q.tolist() for q in rs.seeds],
         "region_build_s": rs.region_build_s, "offline_s": rs.offline_s, "problems": rs.problems,
         "edges": [list(e) for e in rs.edges], "iris": rs.iris, "checked": rs.checked, "region_iris": rs.region_iris,
+        "offline_cpu_s": rs.offline_cpu_s,
     }
     return {
         "set": stored,
@@ -100,6 +101,7 @@ def _build_world(payload: tuple) -> dict:
         "connected": sum(connected),
         "regions": 0 if rs is None else len(rs),
         "offline_s": 0.0 if rs is None else rs.offline_s,
+        "offline_cpu_s": None if rs is None else rs.offline_cpu_s,
         "region_build_s": [] if rs is None else list(rs.region_build_s),
         "region_iris": [] if rs is None else list(rs.region_iris),
         "cache": [i["cache"] for i in infos],
@@ -194,12 +196,12 @@ def _record_world(k: int, outcome, items, out: Path, rows: list[dict]) -> None:
                   [np.asarray(x, float) for x in stored["b"]], [np.asarray(x, float) for x in stored["seeds"]],
                   stored["region_build_s"], stored["offline_s"], stored["problems"],
                   [tuple(e) for e in stored["edges"]], stored["iris"], stored["checked"], stored["region_iris"],
-                  ).save(out / f"{row['world_hash']}.npz")
+                  stored["offline_cpu_s"]).save(out / f"{row['world_hash']}.npz")
     rows.append(row)
     its = [r["iterations"] for r in row.get("region_iris") or []]
     print(f"[{k}/{len(items)}] {row['world_hash']}: {row['regions']} regions (IRIS iterations {its}), "
           f"{row['connected']}/{row['problems']} connected, offline {row['offline_s']:.1f} s "
-          f"({'/'.join(row['cache'])})", flush=True)
+          f"(CPU {row['offline_cpu_s'] or float('nan'):.1f} s; {'/'.join(row['cache'])})", flush=True)
 
 
 def summary_name(selection: str, seeding: str = "chain", options=None) -> str:
@@ -250,7 +252,10 @@ def iris_figures(rows: list[dict]) -> dict:
 
 def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, items: list) -> int:
     built = [r for r in rows if any(c != "hit" for c in r["cache"])]
+    from suite.report.tuning import p90
+
     per_region = [s for r in rows for s in r["region_build_s"]]
+    cpu = [r["offline_cpu_s"] for r in rows if r.get("offline_cpu_s") is not None]
     summary = {
         "dataset": args.dataset, "iris": options.iris, "seeding": options.seeding, "options": options.key_fields(), "worlds": len(rows),
         "worlds_built_now": len(built), "wall_s": wall,
@@ -259,7 +264,9 @@ def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, i
         "offline_s_max": max(r["offline_s"] for r in rows) if rows else None,
         "regions_median": statistics.median(r["regions"] for r in rows) if rows else None,
         "region_iris_s_median": statistics.median(per_region) if per_region else None,
-        "offline_s_p90": float(statistics.quantiles([r["offline_s"] for r in rows], n=10)[-1]) if len(rows) > 1 else None,
+        "offline_s_p90": p90([r["offline_s"] for r in rows]) if rows else None,
+        "offline_cpu_s_median": statistics.median(cpu) if cpu else None,
+        "offline_cpu_s_p90": p90(cpu) if cpu else None,
         "iris_runs": iris_figures(rows),
         "size_bytes": sum(f.stat().st_size for f in out.glob("*.npz")),
         "worlds_detail": rows,

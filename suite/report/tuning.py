@@ -94,12 +94,15 @@ class CandidateResult:
 
 
 def offline_per_world(records: Sequence[dict]) -> dict[str, float]:
-    """world -> the offline seconds its records report (`stats.offline_s` by `stats.world_hash`;
-    the largest when records of one world differ). Records without offline work are left out."""
+    """world -> the offline seconds its records report, by `stats.world_hash`: the build's CPU time
+    (`stats.offline_cpu_s`: one IRIS thread, so the wall time on a core of its own, whatever else
+    the machine ran) where recorded, else its wall time (`stats.offline_s`); the largest when
+    records of one world differ. Records without offline work are left out."""
     out: dict[str, float] = {}
     for r in records:
         stats = r.get("stats") or {}
-        world, seconds = stats.get("world_hash"), stats.get("offline_s")
+        world = stats.get("world_hash")
+        seconds = stats.get("offline_cpu_s") if stats.get("offline_cpu_s") is not None else stats.get("offline_s")
         if world is not None and seconds is not None and seconds > 0:
             out[world] = max(float(seconds), out.get(world, 0.0))
     return out

@@ -153,6 +153,10 @@ def test_regions_build_cli_builds_once_per_world(tmp_path, capsys):
     summary = json.loads((tmp_path / "build-quick.json").read_text())
     assert summary["worlds"] == 1 and summary["worlds_built_now"] == 1 and summary["iris"] == "zo"
     assert summary["worlds_detail"][0]["world_hash"] == built.stem and summary["offline_s_median"] > 0
+    # each region's IRIS run is recorded (iterations, why it stopped), and the build's CPU time
+    assert summary["iris_runs"]["regions_recorded"] == summary["worlds_detail"][0]["regions"] >= 1
+    assert summary["iris_runs"]["iterations_max"] == 1 and summary["iris_runs"]["stop"] == {"iteration_limit": 1 * summary["iris_runs"]["regions_recorded"]}
+    assert 0 < summary["worlds_detail"][0]["offline_cpu_s"] and RegionSet.load(built).offline_cpu_s > 0
     capsys.readouterr()
     assert main(argv) == 0  # the second build finds the world built and verified
     assert "(0 built now)" in capsys.readouterr().out

@@ -277,5 +277,6 @@ def test_offline_seconds_count_each_world_once():
     from suite.report.tuning import offline_per_world
 
     recs = [{"stats": {"world_hash": "a", "offline_s": 30.0}}, {"stats": {"world_hash": "a", "offline_s": 30.0}},
-            {"stats": {"world_hash": "b", "offline_s": 90.0}}, {"stats": {}}, {"stats": None}]
-    assert offline_per_world(recs) == {"a": 30.0, "b": 90.0}
+            {"stats": {"world_hash": "b", "offline_s": 90.0}}, {"stats": {}}, {"stats": None},
+            {"stats": {"world_hash": "c", "offline_s": 200.0, "offline_cpu_s": 80.0}}]  # CPU time where recorded
+    assert offline_per_world(recs) == {"a": 30.0, "b": 90.0, "c": 80.0}
