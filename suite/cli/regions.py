@@ -46,6 +46,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b.add_argument("--rebuild", action="store_true",
                    help="grow every world from nothing, ignoring cached regions (e.g. to re-measure the offline "
                         "cost on a quiet machine, or after changing how regions grow)")
+    _add_report(sub)
+
+
+def _add_report(sub) -> None:
+    r = sub.add_parser("report", help="per family, what the cached regions of a setting are (nothing is grown)")
+    r.add_argument("--dataset", required=True, help="NAME[:TIER], or NAME with --tune-sample")
+    r.add_argument("--tune-sample", type=positive_int, default=None, metavar="PER_FAMILY",
+                   help="the worlds of `tune --per-family PER_FAMILY`'s sample")
+    r.add_argument("--seeding", default=None, help="chain or cliques (default: gcs's tuned setting)")
+    r.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="region_set",
+                   help="a region option of gcs over its tuned settings (as for build); repeatable")
+    r.add_argument("--json", default=None, metavar="FILE", help="also write the figures, per world too, as JSON")
 
 
 def parse_region_settings(items: list[str]) -> dict:
@@ -110,10 +122,32 @@ def _build_world(payload: tuple) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.action == "report":
+        return _report(args)
+    return _build(args)
 
+
+def _options(args):
     from planners.gcs import GcsPlanner
-    from planners.gcs_regions import world_hash
     from suite.run.trial import make_config
+
+    chosen = {k: v for k, v in (("iris", getattr(args, "iris", None)), ("seeding", args.seeding)) if v is not None}
+    chosen.update(parse_region_settings(args.region_set))
+    return make_config(GcsPlanner, chosen).region_options()  # gcs's tuned settings, overlaid
+
+
+def _report(args: argparse.Namespace) -> int:
+    from suite.report.regions_table import markdown, report
+
+    rep = report(args.dataset, tune_sample=args.tune_sample, options=_options(args))
+    print(markdown(rep))
+    if args.json:
+        Path(args.json).write_text(json.dumps(rep, indent=1, default=str))
+    return 0 if rep["worlds"] else 1
+
+
+def _build(args: argparse.Namespace) -> int:
+    from planners.gcs_regions import world_hash
     from suite.problems.dataset import dataset_dir, load_dataset, parse_dataset_arg
 
     if args.scheduler and args.executor != "dask":
@@ -126,9 +160,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         ds = load_dataset(args.dataset)
         problems = ds.problems
-    chosen = {k: v for k, v in (("iris", args.iris), ("seeding", args.seeding)) if v is not None}
-    chosen.update(parse_region_settings(args.region_set))
-    options = make_config(GcsPlanner, chosen).region_options()  # gcs's tuned settings, overlaid
+    options = _options(args)
     out = Path(args.out) if args.out else dataset_dir(parse_dataset_arg(args.dataset)[0]) / "regions"
     try:
         out.mkdir(parents=True, exist_ok=True)

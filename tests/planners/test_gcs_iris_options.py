@@ -131,3 +131,28 @@ def test_a_grown_region_records_its_iterations_stop_and_inscribed_volume(open_tr
     if record["iterations"] == 2:
         assert record["stop"] == ["iteration_limit"]
     assert record["volume"] > 0 and 0 < record["radius_rad"] < 10
+
+
+def test_regions_report_reads_the_cached_sets_per_family(tmp_path, capsys):
+    """`regions report` grows nothing: it reads the shipped gcs-arm set at gcs's settings, counts one
+    iteration per region for a set built before iterations were recorded at a limit of 1, and says
+    which worlds of another setting are not built."""
+    import json as _json
+
+    from planners import gcs_regions
+    from suite.cli import main
+
+    before = gcs_regions.GROWN_IN_PROCESS
+    out = tmp_path / "report.json"
+    assert main(["regions", "report", "--dataset", "gcs-arm:tasks", "--json", str(out)]) == 0
+    rep = _json.loads(out.read_text())
+    (fam, every) = rep["families"]
+    assert fam["family"] == "gcs-arm" and every["family"] == "all" and fam["worlds"] == 1
+    assert fam["iterations_max"] == 1 and fam["stops"] == {"iteration_limit": fam["regions_per_world"]}
+    assert 0 <= fam["linked"] <= fam["problems"] == 5 and fam["radius_rad_median"] > 0
+    assert gcs_regions.GROWN_IN_PROCESS == before
+    capsys.readouterr()
+    assert main(["regions", "report", "--dataset", "gcs-arm:tasks", "--set", "max_iterations=7"]) == 1
+    assert "1 world(s) have no cached set at these options" in capsys.readouterr().out
+    assert main(["regions", "report", "--dataset", "gcs-arm:tasks", "--set", "iterations=7"]) == 2
+    assert "expected NAME=VALUE with NAME one of" in capsys.readouterr().err
