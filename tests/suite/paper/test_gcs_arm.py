@@ -69,3 +69,21 @@ def test_compare_runs_the_gcs_arm_dataset_and_judges_it(tmp_path):
     gcs = [r for r in recs if r["planner"] == "gcs"]
     assert all(r["stats"].get("regions_cache") in ("hit", None) for r in gcs)  # never built inside a trial
     assert sum(r["status"] == "success" for r in recs if r["planner"] == "rrt") >= 1
+
+
+def test_finding_3_does_not_hold_where_an_optimum_collides():
+    """Rounding optimal in every task is not the paper's finding when the 'optimum' collides in our
+    world: a colliding path is not a solution."""
+    from suite.paper.gcs_arm_report import PAPER, findings
+
+    table = {t: {} for t in PAPER["lengths_rad"]}
+
+    def opt(valid):
+        return {"connected": True, "rounding_optimal": True, "linear_rounding_optimal": True, "relaxation_gap": 0.05,
+                "linear_gap": 0.05, "rounded_path_valid": valid, "linear_path_valid": valid}
+
+    optimality = {"paper": {t: opt(True) for t in table},
+                  "ours": {t: opt(i != 0) for i, t in enumerate(table)}}
+    third = findings(table, optimality, {})[2]
+    held = {x["regions"]: x["held"] for x in third["by_regions"]}
+    assert held == {"ours": False, "paper": True}
