@@ -98,10 +98,12 @@ class RegionOptions:
     those sets keep their names.
 
         termination_threshold: IRIS stops when an iteration grows the inscribed ellipsoid's
-            volume (rad^7) by at most this much (absolute; negative: off). Drake's default, 0.02,
-            stops every region whose ellipsoid is smaller than that after its first iteration,
-            whatever `max_iterations` says (iris_np2.cc, CheckTerminationConditions): a 7-D
-            ellipsoid of 0.3 rad radius has volume 0.001. The GCS paper turned it off (-1).
+            volume (rad^7) by at most this much (absolute). Drake's default, 0.02, stops every
+            region whose ellipsoid grew by less than that after its first iteration, whatever
+            `max_iterations` says (iris_np2.cc, CheckTerminationConditions): a 7-D ellipsoid of
+            0.3 rad radius has volume 0.001. The GCS paper set -1, which is off except when an
+            iteration shrinks the volume by more than 1 rad^7 (the test is delta <= threshold);
+            IRIS then returns that last, smaller region.
         relative_termination_threshold: ... or by at most this fraction of the last volume
             (the paper: 0.02; Drake's default 0.001).
         tau: the statistical test's decision threshold (Drake's unadaptive test).
