@@ -156,3 +156,18 @@ def test_regions_report_reads_the_cached_sets_per_family(tmp_path, capsys):
     assert "1 world(s) have no cached set at these options" in capsys.readouterr().out
     assert main(["regions", "report", "--dataset", "gcs-arm:tasks", "--set", "iterations=7"]) == 2
     assert "expected NAME=VALUE with NAME one of" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("tier", ["recycle-v3.1:quick", "recycle-v3:quick"])
+def test_every_world_of_a_shipped_tier_still_finds_its_set(tier):
+    """Every collision world of the shipped quick tiers finds its region set under gcs's settings
+    (the late options and the thresholds kept out of the key)."""
+    from planners.gcs import GcsPlanner
+    from planners.gcs_sets import find_cached
+    from suite.problems.dataset import load_dataset
+    from suite.run.trial import make_config
+
+    options = make_config(GcsPlanner, {}).region_options()
+    worlds = {world_hash(p, options) for p in load_dataset(tier).problems if p.pre_status is None and p.q_goal is not None}
+    missing = [w for w in worlds if find_cached(w, None) is None]
+    assert len(worlds) > 50 and not missing, missing
