@@ -342,6 +342,7 @@ def save_npz_atomically(path: Path, **arrays) -> None:
     os.close(fd)
     with open(tmp, "wb") as f:
         np.savez_compressed(f, **arrays)
+    os.chmod(tmp, 0o644)  # mkstemp makes it private; a region set is data others read
     os.replace(tmp, path)
 
 
