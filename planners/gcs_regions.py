@@ -245,8 +245,8 @@ class RegionBuilder:
             ellipsoid: the starting ellipsoid (centred at q); a hypersphere of `seed_radius_rad`
                 by default.
 
-        Returns (A, b, seconds, {iterations, stop}: from IRIS's own log). Containment that IRIS refuses is dropped and the region grown
-        without it."""
+        Returns (A, b, seconds, {iterations, stop}: from IRIS's own log). Containment that IRIS
+        refuses is dropped and the region grown without it."""
         from pydrake.geometry.optimization import Hyperellipsoid
         from pydrake.planning import IrisNp2, IrisZo
 

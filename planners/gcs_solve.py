@@ -353,6 +353,22 @@ def cut_blocked_segment(rs: RegionSet, q0: np.ndarray, q1: np.ndarray, *, world,
     return cut
 
 
+def uniform_samples(poly, n: int, gen, *, mixing_steps: int) -> np.ndarray:
+    """Up to `n` uniform samples of the H-polyhedron `poly` (Drake's hit-and-run
+    `UniformSample`, `mixing_steps` apart, from its Chebyshev centre: strictly inside, where a seed
+    may lie on a face), drawn with `gen`; fewer in a sliver the sampler cannot move in (what was
+    drawn until then). Returns an (m, dim) array, m <= n."""
+    x = poly.ChebyshevCenter()
+    Q = []
+    try:
+        for _ in range(n):
+            x = poly.UniformSample(gen, x, mixing_steps)
+            Q.append(x)
+    except ValueError:  # a sliver the sampler cannot move in
+        pass
+    return np.array(Q).reshape(len(Q), poly.ambient_dimension())
+
+
 def check_with_world(A: np.ndarray, b: np.ndarray, *, world, center: np.ndarray, keep: list[np.ndarray],
                      samples: int, rounds: int, margin_rad: float, seed: int):
     """Cut a region where the python-fcl world (the validator's engine) finds collisions among
@@ -363,18 +379,9 @@ def check_with_world(A: np.ndarray, b: np.ndarray, *, world, center: np.ndarray,
     gen = RandomGenerator(seed)
     cuts = 0
     for _ in range(rounds):
-        poly = HPolyhedron(A, b)
-        x = poly.ChebyshevCenter()  # strictly inside (the seed may lie on a face)
-        Q = []
-        try:
-            for _ in range(samples):
-                x = poly.UniformSample(gen, x, 5)
-                Q.append(x)
-        except ValueError:  # a sliver the sampler cannot move in: check what was drawn
-            pass
-        if not Q:
+        Q = uniform_samples(HPolyhedron(A, b), samples, gen, mixing_steps=5)
+        if not len(Q):
             break
-        Q = np.array(Q)
         bad = Q[~world.states_free(Q)]
         if len(bad) == 0:
             break

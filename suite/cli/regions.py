@@ -258,34 +258,11 @@ def summary_name(selection: str, seeding: str = "chain", options=None) -> str:
     return "build-" + re.sub(r"[^A-Za-z0-9._=+-]+", "_", rest) + tail + ".json"
 
 
-def iris_figures(rows: list[dict]) -> dict:
-    """What IRIS did over the built regions: iterations per region (median, max, histogram), why
-    it stopped (counts), and the inscribed radius (rad: median, p10)."""
-    import numpy as np
-
-    regions = [r for row in rows for r in row.get("region_iris") or []]
-    if not regions:
-        return {"regions_recorded": 0}
-    its = [int(r["iterations"]) for r in regions]
-    stops: dict[str, int] = {}
-    for r in regions:
-        for reason in r["stop"]:
-            stops[reason] = stops.get(reason, 0) + 1
-    radii = [r["radius_rad"] for r in regions if r.get("radius_rad") is not None]
-    return {
-        "regions_recorded": len(regions),
-        "iterations_median": float(np.median(its)), "iterations_max": max(its),
-        "iterations_histogram": {str(k): its.count(k) for k in sorted(set(its))},
-        "stop": dict(sorted(stops.items())),
-        "radius_rad_median": float(np.median(radii)) if radii else None,
-        "radius_rad_p10": float(np.percentile(radii, 10)) if radii else None,
-    }
-
-
 def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, items: list) -> int:
-    built = [r for r in rows if any(c != "hit" for c in r["cache"])]
+    from suite.report.regions_table import iris_summary
     from suite.report.tuning import p90
 
+    built = [r for r in rows if any(c != "hit" for c in r["cache"])]
     per_region = [s for r in rows for s in r["region_build_s"]]
     cpu = [r["offline_cpu_s"] for r in rows if r.get("offline_cpu_s") is not None]
     summary = {
@@ -299,7 +276,7 @@ def _write_summary(rows: list[dict], out: Path, args, options, *, wall: float, i
         "offline_s_p90": p90([r["offline_s"] for r in rows]) if rows else None,
         "offline_cpu_s_median": statistics.median(cpu) if cpu else None,
         "offline_cpu_s_p90": p90(cpu) if cpu else None,
-        "iris_runs": iris_figures(rows),
+        "iris_runs": iris_summary([x for r in rows for x in r.get("region_iris") or []]),
         "size_bytes": sum(f.stat().st_size for f in out.glob("*.npz")),
         "worlds_detail": rows,
     }

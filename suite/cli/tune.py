@@ -180,6 +180,8 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
     print(f"pooled over problems (the rule before recycle-v3) it would be: {json.dumps(results[pooled].settings, default=str)}")
     if args.write:
         from planners.worlds import checker
+
+        excluded = search_exclude(args.planner)
         from suite.run.runner import git_commit
 
         data = {
@@ -192,8 +194,7 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
             "decided_by": explained.decided_by,
             **({"offline_bound_s": bound,
                 "over_offline_bound": [results[i].settings for i in explained.over_offline_bound]} if bound else {}),
-            **({"excluded": [{"settings": rule, "why": why} for rule, why in search_exclude(args.planner)]}
-               if search_exclude(args.planner) else {}),
+            **({"excluded": [{"settings": rule, "why": why} for rule, why in excluded]} if excluded else {}),
             "ties": {"solved": list(explained.solved_tied), "objective": list(explained.objective_tied),
                      "other_metric": list(explained.other_tied)},
             "pooled_choice": {"settings": results[pooled].settings, "weighting": f"pooled: {WEIGHTINGS['pooled']}"},

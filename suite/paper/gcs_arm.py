@@ -309,10 +309,13 @@ def gcs_optimality(problem, rs, *, max_rounded_paths: int = 10, seed: int = 0) -
     out["rounding_optimal"] = bool(costs) and out["rounded_rad"] <= out["optimum_rad"] * (1 + 1e-3)
     from planners.gcs_solve import sample_trajectory
 
-    path = sample_trajectory(traj, order=1, step_rad=0.02)
-    full = np.vstack([[problem.q_start]] * (joined["start_join"] == "segment") + [path]
-                     + [[problem.q_goal]] * (joined["goal_join"] == "segment"))
-    out["rounded_path_valid"] = validate_path(problem, full, world) is None
+    def valid(points) -> bool:
+        """Whether a path between the joined ends, with the joining segments added back, passes the validator."""
+        full = np.vstack([[problem.q_start]] * (joined["start_join"] == "segment") + [np.asarray(points, float)]
+                         + [[problem.q_goal]] * (joined["goal_join"] == "segment"))
+        return validate_path(problem, full, world) is None
+
+    out["rounded_path_valid"] = valid(sample_trajectory(traj, order=1, step_rad=0.02))
     # The paper's own formulation (LinearGCS: costs on edges) on the same regions and ends.
     from planners.gcs_regions import quiet_drake
     from suite.paper.paper_regions import linear_gcs
@@ -326,10 +329,7 @@ def gcs_optimality(problem, rs, *, max_rounded_paths: int = 10, seed: int = 0) -
         out["linear_rounded_rad"] = lin["rounded_rad"] + ends
         out["linear_gap"] = (out["linear_rounded_rad"] - out["linear_relaxed_rad"]) / out["linear_relaxed_rad"]
         out["linear_rounding_optimal"] = bool(costs) and out["linear_rounded_rad"] <= out["optimum_rad"] * (1 + 1e-3)
-        pts = np.asarray(lin["waypoints"], float)
-        full = np.vstack([[problem.q_start]] * (joined["start_join"] == "segment") + [pts]
-                         + [[problem.q_goal]] * (joined["goal_join"] == "segment"))
-        out["linear_path_valid"] = validate_path(problem, full, world) is None
+        out["linear_path_valid"] = valid(lin["waypoints"])
     else:
         out["linear_status"] = [lin.get("relaxation_status"), lin.get("rounded_status")]
     return out

@@ -15,7 +15,7 @@ committed (docs/gcs-paper-sources.md, section 7e).
   allow_pickle=False).
 - `paper_region_set` makes them a `planners.gcs_sets.RegionSet` of the gcs-arm world, named by the
   same world hash as `gcs`'s own set at the paper's settings, with its edges computed as the
-  paper's code does (`IntersectsWith`) and marked built from the world, so that `gcs`, given its
+  paper's code does (`IntersectsWith`, through `planners.gcs_regions.update_edges`) and marked built from the world, so that `gcs`, given its
   directory as `regions_dir` and `build_regions: false`, plans on them.
 - `collision_fractions`: uniform samples of each region (hit-and-run) judged by the python-fcl world.
 - `linear_gcs`: the paper's `LinearGCS` formulation, written here from its equations on Drake's
@@ -136,35 +136,23 @@ def load_paper_regions(directory: Path = PAPER_REGIONS_DIR) -> tuple[list[str], 
         return names, [z[f"A_{n}"] for n in names], [z[f"b_{n}"] for n in names]
 
 
-def intersection_edges(A: list, b: list) -> list[tuple[int, int]]:
-    """Both directions of every pair of intersecting regions (the paper's `findEdgesViaOverlaps`:
-    `HPolyhedron.IntersectsWith`)."""
-    from pydrake.geometry.optimization import HPolyhedron
-
-    polys = [HPolyhedron(a, c) for a, c in zip(A, b)]
-    edges = []
-    for i in range(len(polys)):
-        for j in range(i + 1, len(polys)):
-            if polys[i].IntersectsWith(polys[j]):
-                edges += [(i, j), (j, i)]
-    return sorted(edges)
-
-
 def paper_region_set(problem, options) -> Any:
     """The paper's regions as the `RegionSet` of `problem`'s world at region options `options`
     (named by `world_hash(problem, options)`, marked built from the world, no build time)."""
+    from pydrake.geometry.optimization import HPolyhedron
+
+    from planners.gcs_regions import update_edges
     from planners.gcs_sets import WORLD_BUILT, RegionSet, world_hash
 
     names, A, b = load_paper_regions()
-    seeds = []
-    from pydrake.geometry.optimization import HPolyhedron
-
-    for a, c in zip(A, b):  # a point of each region: its Chebyshev centre (the file keeps no seeds)
-        seeds.append(HPolyhedron(a, c).ChebyshevCenter())
-    return RegionSet(world_hash(problem, options), list(A), list(b), seeds, [0.0] * len(A), 0.0, [],
-                     intersection_edges(A, b), "paper", [WORLD_BUILT],
-                     [{"name": n, "source": f"{SOURCE['repository']}@{SOURCE['commit'][:8]}:{SOURCE['path']}"}
-                      for n in names])
+    # a point of each region: its Chebyshev centre (the file keeps no seeds)
+    seeds = [HPolyhedron(a, c).ChebyshevCenter() for a, c in zip(A, b)]
+    rs = RegionSet(world_hash(problem, options), list(A), list(b), seeds, [0.0] * len(A), 0.0, [], [], "paper",
+                   [WORLD_BUILT], [{"name": n, "source": f"{SOURCE['repository']}@{SOURCE['commit'][:8]}:{SOURCE['path']}"}
+                                   for n in names])
+    update_edges(rs, 0)  # the paper's `findEdgesViaOverlaps`: both directions of each intersecting pair
+    rs.edges.sort()
+    return rs
 
 
 def write_paper_region_set(problem, options, directory: Path) -> Path:
@@ -183,6 +171,7 @@ def collision_fractions(problem, names: list[str], A: list, b: list, *, samples:
     from pydrake.common import RandomGenerator
     from pydrake.geometry.optimization import HPolyhedron
 
+    from planners.gcs_solve import uniform_samples
     from planners.worlds import collision_world
     from scenes.robot_model import load_robot
 
@@ -191,16 +180,10 @@ def collision_fractions(problem, names: list[str], A: list, b: list, *, samples:
     lo, hi = robot.lower_rad, robot.upper_rad
     out = {}
     for name, a, c in zip(names, A, b):
-        poly = HPolyhedron(a, c)
-        gen = RandomGenerator(seed)
-        q = poly.ChebyshevCenter()
-        Q = np.empty((samples, a.shape[1]))
-        for k in range(samples):
-            q = poly.UniformSample(gen, q, mixing_steps)
-            Q[k] = q
+        Q = uniform_samples(HPolyhedron(a, c), samples, RandomGenerator(seed), mixing_steps=mixing_steps)
         free = world.states_free(Q)
         outside = ~np.all((Q >= lo - 1e-9) & (Q <= hi + 1e-9), axis=1)
-        out[name] = {"samples": samples, "collide": int((~free).sum()), "fraction": float((~free).mean()),
+        out[name] = {"samples": len(Q), "collide": int((~free).sum()), "fraction": float((~free).mean()),
                      "outside_limits": int(outside.sum()), "faces": int(len(c))}
     return out
 

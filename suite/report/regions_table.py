@@ -52,7 +52,30 @@ def _world_rows(problems, metas, options) -> tuple[list[dict], list[str]]:
 
 
 def _p90(values: list[float]) -> float | None:
-    return float(np.percentile(values, 90)) if values else None
+    from suite.report.tuning import p90
+
+    return p90(values) if values else None
+
+
+def iris_summary(regions: list[dict]) -> dict[str, Any]:
+    """What IRIS did over `regions` (`RegionSet.region_iris` records): iterations per region
+    (median, max, histogram; unrecorded ones left out), why they stopped (counts: a region
+    stopped for several reasons at once counts for each) and the inscribed radius (rad: median,
+    p10)."""
+    its = [int(x["iterations"]) for x in regions if x.get("iterations") is not None]
+    radii = [x["radius_rad"] for x in regions if x.get("radius_rad") is not None]
+    stops: dict[str, int] = {}
+    for x in regions:
+        for reason in x["stop"]:
+            stops[reason] = stops.get(reason, 0) + 1
+    return {
+        "regions_recorded": len(regions),
+        "iterations_median": statistics.median(its) if its else None, "iterations_max": max(its) if its else None,
+        "iterations_histogram": {str(k): its.count(k) for k in sorted(set(its))},
+        "stop": dict(sorted(stops.items())),
+        "radius_rad_median": statistics.median(radii) if radii else None,
+        "radius_rad_p10": float(np.percentile(radii, 10)) if radii else None,
+    }
 
 
 def family_table(rows: list[dict]) -> list[dict[str, Any]]:
@@ -62,21 +85,15 @@ def family_table(rows: list[dict]) -> list[dict[str, Any]]:
     out = []
     for family in [*sorted({r["family"] for r in rows}), "all"]:
         mine = [r for r in rows if family in ("all", r["family"])]
-        regions = [x for r in mine for x in r["iris"]]
-        its = [x["iterations"] for x in regions if x.get("iterations") is not None]
-        radii = [x["radius_rad"] for x in regions if x.get("radius_rad") is not None]
-        stops: dict[str, int] = {}
-        for x in regions:
-            for reason in x["stop"]:
-                stops[reason] = stops.get(reason, 0) + 1
+        iris = iris_summary([x for r in mine for x in r["iris"]])
         cpu = [r["offline_cpu_s"] for r in mine if r["offline_cpu_s"] is not None]
         wall = [r["offline_s"] for r in mine]
         out.append({
             "family": family, "worlds": len(mine),
             "regions_per_world": statistics.median(r["regions"] for r in mine) if mine else None,
-            "iterations_median": statistics.median(its) if its else None, "iterations_max": max(its) if its else None,
-            "stops": dict(sorted(stops.items())),
-            "radius_rad_median": statistics.median(radii) if radii else None,
+            "iterations_median": iris["iterations_median"], "iterations_max": iris["iterations_max"],
+            "stops": iris["stop"],
+            "radius_rad_median": iris["radius_rad_median"],
             "linked": sum(r["linked"] for r in mine), "problems": sum(r["problems"] for r in mine),
             "offline_cpu_s_median": statistics.median(cpu) if cpu else None, "offline_cpu_s_p90": _p90(cpu),
             "offline_wall_s_median": statistics.median(wall) if wall else None, "offline_wall_s_p90": _p90(wall),

@@ -87,8 +87,8 @@ class CandidateResult:
     #: per distinct problem (key) its family, scene, time to solve (failures at the budget) and
     #: length ratio (NaN unless solved): what the paired tests compare
     per_problem: dict[tuple, tuple[str, tuple, float, float]] = dataclasses.field(default_factory=dict, compare=False)
-    #: offline seconds per world (`stats.offline_s`, each world once, by `stats.world_hash`): the
-    #: 90th percentile and the worlds counted; NaN and 0 for a planner without offline work
+    #: offline seconds per world (`offline_per_world`: CPU time where recorded, else wall time; each
+    #: world once): the 90th percentile and the worlds counted; NaN and 0 for a planner without one
     offline_p90_s: float = math.nan
     offline_worlds: int = 0
 

@@ -108,11 +108,12 @@ def test_gcs_plans_on_the_papers_regions(tmp_path):
 
 def test_linear_gcs_on_the_papers_regions_reaches_the_papers_length():
     """The paper's formulation on its own regions: RB->AS relaxed and rounded at about 1.8 rad."""
-    from suite.paper.paper_regions import intersection_edges, linear_gcs
+    from planners.gcs_sets import RegionOptions
+    from suite.paper.paper_regions import linear_gcs, paper_region_set
 
     problem = _task("RB->AS")
     names, A, b = load_paper_regions()
-    out = linear_gcs(A, b, intersection_edges(A, b), problem.q_start, problem.q_goal)
+    out = linear_gcs(A, b, paper_region_set(problem, RegionOptions()).edges, problem.q_start, problem.q_goal)
     assert [names[i] for i in out["start_regions"]] == ["RB"] and [names[i] for i in out["goal_regions"]] == ["AS"]
     assert out["rounded_rad"] == pytest.approx(1.80, abs=0.01)
     assert out["relaxed_rad"] <= out["rounded_rad"] + 1e-6
