@@ -1,11 +1,16 @@
-"""The moving-bin table: per planner and bin speed, cans in the bin and why the others were lost.
+"""The moving-bin tables: per planner and bin speed, cans in the bin and why the others were lost;
+planners compared episode by episode on the same bin paths; where a replan's time goes.
 
-Every figure comes from moving_bin.json alone (`suite.execution.moving_bin.MovingBinRecord`).
+Every figure comes from moving_bin.json alone (plain dicts, `suite.execution.moving_bin.MovingBinRecord`).
+Records written before the loop joined replans on the move lack its newer fields (bin_seed,
+path_index, latency_mode, release_mode, cans_put_down, failures_by_stage, splices_at_rest, ...):
+every one of them is read with a default, and a column whose field no record carries is not shown.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -18,25 +23,81 @@ from suite.report.summary_tables import format_number
 
 MOVING_BIN_INTRO = """## Moving bin
 
-The bin moves in the floor plane along a seeded path (trapezoidal speed profiles between random
-points of its region), held by a person standing beside it (an obstacle too); the robot sees it
-through a delayed, sampled, noisy estimate and predicts it at constant velocity
-(docs/moving-bin.md). Approach, descend and lift are the planner's plans; the transit is planned
-online at lift start toward the predicted bin and replanned under a deadline whenever the
-predicted drop position drifts; the can is released only over the bin's opening; the return is
-planned from where the arm is. Every planner runs the same loop; speed 0 is the static bin
-through it. Cans in bin: with its 95% Wilson interval. Replans: deadline-bound replans per can
-attempted. Latency: their wall time (median / p95; measured on the machine of the run).
-Missed: over the deadline (the current plan went on); failed: no valid plan within it. Contacts:
-episodes of the robot or the carried can touching the bin or the person. Jump: the largest
-joint jump of the command at a splice (position rad / velocity rad/s). Grasp-release: median
-time from the closed grasp to the release.
+The bin moves in the floor plane along a seeded path, held by a person beside it (an obstacle
+too); the robot sees it through a delayed, sampled, noisy estimate and predicts it at constant
+velocity (docs/moving-bin.md). Approach, descend and lift are the planner's plans; the transit is
+planned online toward the predicted bin and replanned under a deadline when the predicted drop
+drifts. A replan joins the current motion without stopping it (a C1/C2 blend onto the new path;
+"at rest" counts the joins that stopped the arm). The can is released on the move, the gripper
+tracking the bin's estimate while it opens (release mode "rest": from rest). Every can is
+attempted: one not released within its time limit is put down on the plate and the episode goes
+on. Each episode's bin path has its own seed and every planner meets the same paths, so planners
+are compared episode by episode. Latency is measured (wall time on the run's machine) or modelled
+(a declared constant per planner: the records are reproducible on any machine). Speed 0 is the
+static bin through the same loop.
+
+Cans in bin / attempted: with its 95% Wilson interval (not attempted: cans an older loop never
+tried after giving one up). Given up (put down): cans given up (of them put down on the plate).
+Released moving / released: releases on the move, of all releases. Replans: deadline-bound replans
+per can attempted; latency: their median / p95. Missed: over the deadline (the current motion went
+on); failed: no valid plan within it; by stage: the step that failed them. Splice speed: the
+largest joint speed at the splice, median over splices. Contacts: episodes of the robot or the
+carried can touching the bin or the person; near misses and SSM holds (protective stops for the
+person) beside them. Jump: the largest jump of the command at a splice (position rad, velocity
+rad/s). Grasp-release: median time from the closed grasp to the release.
 """
+
+PAIRED_CAPTION = (
+    "Paired differences between planners. The unit is an episode: one scene, one seeded bin path, one "
+    "speed (and latency and release mode), which every planner meets. For each episode both planners ran "
+    "(status ok, at least one can attempted each), d = A's cans in the bin per can attempted minus B's; the "
+    "table gives the episodes paired, the mean of d in percentage points and its 95% interval from a "
+    "percentile bootstrap over episodes (10,000 resamples, seed 0); established: the interval excludes 0; "
+    "A ahead / B ahead: the episodes where each put more in the bin. \"all\" pools every speed. With few "
+    "episodes the bootstrap interval is too narrow (over 2 episodes it takes at most 3 values): read an "
+    "'established' over few episodes as a hint.")
+
+#: The failure stages in the order of a replan, and their short names in a table cell.
+STAGES = ("goal_ik", "join", "planner", "validator", "person", "timing", "budget")
+STAGE_SHORT = {"goal_ik": "ik"}
+#: A replan's steps in order (old records have "blend", new ones "join" and "person").
+STEPS = ("world", "blend", "ik", "plan", "join", "validate", "person", "timing")
+#: Bootstrap of the paired differences.
+N_RESAMPLES = 10_000
+BOOTSTRAP_SEED = 0
+
+
+def _latency_mode(r: dict[str, Any]) -> str:
+    return r.get("latency_mode") or "measured"
+
+
+def _release_mode(r: dict[str, Any]) -> str:
+    return r.get("release_mode") or "rest"
+
+
+def _deadline_bound(e: dict[str, Any]) -> bool:
+    """A replan under a deadline: one with a deadline, or a drift or arrival replan (in modelled
+    mode these carry none); not the first transit, a return or a put-down, which the arm waits for."""
+    return e.get("deadline_s") is not None or e.get("trigger") in ("drift", "arrival")
+
+
+def _total(rs: Sequence[dict[str, Any]], key: str) -> int | None:
+    """The sum of an integer field over the records carrying it; None if none does (an older record)."""
+    values = [r[key] for r in rs if r.get(key) is not None]
+    return int(sum(values)) if values else None
+
+
+def _planner_order(records: Sequence[dict[str, Any]], planners: Sequence[str] | None) -> list[str]:
+    present = list(dict.fromkeys(r["planner"] for r in records))
+    order = [p for p in (planners or ()) if p in present]
+    return order + [p for p in present if p not in order]  # the records' own planners too
 
 
 @dataclasses.dataclass(frozen=True)
 class SpeedCell:
-    """One planner at one bin speed, over its episodes."""
+    """One planner at one bin speed (and latency and release mode), over its episodes.
+
+    Counts of fields an older record lacks are None when no record of the cell carries them."""
 
     planner: str
     speed_m_s: float
@@ -57,45 +118,101 @@ class SpeedCell:
     given_up: int
     not_applicable: str
     errors: int
+    latency_mode: str = "measured"
+    release_mode: str = "rest"
+    splices: int = 0
+    cans_released: int = 0
+    not_attempted: int = 0
+    put_down: int | None = None
+    failures_by_stage: dict[str, int] | None = None
+    splices_at_rest: int | None = None
+    splice_speeds_rad_s: tuple[float, ...] = ()
+    releases_moving: int | None = None
+    release_speeds_m_s: tuple[float, ...] = ()
+    near_misses_person: int | None = None
+    ssm_holds: int | None = None
+    person_min_distance_m: float | None = None
 
     @property
     def rate(self) -> float:
-        return self.cans_in_bin / self.cans_total if self.cans_total else math.nan
+        """Cans in the bin per can attempted."""
+        return self.cans_in_bin / self.cans_attempted if self.cans_attempted else math.nan
 
     @property
     def replans_per_can(self) -> float:
         return self.replans / self.cans_attempted if self.cans_attempted else math.nan
 
 
+def _stages(rs: Sequence[dict[str, Any]]) -> dict[str, int] | None:
+    tables = [r["failures_by_stage"] for r in rs if isinstance(r.get("failures_by_stage"), dict)]
+    if not tables:
+        return None
+    out: dict[str, int] = {}
+    for t in tables:
+        for k, v in t.items():
+            out[k] = out.get(k, 0) + int(v)
+    return out
+
+
+def _splice_speeds(rs: Sequence[dict[str, Any]]) -> tuple[float, ...]:
+    """The joint speed at every splice (the events'); for a record whose events lack it, its median."""
+    out: list[float] = []
+    for r in rs:
+        per_event = [e["splice_speed_rad_s"] for e in r.get("events", ())
+                     if e.get("outcome") == "spliced" and e.get("splice_speed_rad_s") is not None]
+        if per_event:
+            out += per_event
+        elif r.get("splice_speed_median_rad_s") is not None:
+            out.append(r["splice_speed_median_rad_s"])
+    return tuple(out)
+
+
 def speed_cells(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None) -> list[SpeedCell]:
-    """Per planner (in the given order, then any other in the records) and speed (ascending), the
-    episodes' totals."""
-    present = list(dict.fromkeys(r["planner"] for r in records))
-    order = [p for p in (planners or ()) if p in present]
-    planners = order + [p for p in present if p not in order]  # the records' own planners too
+    """Per planner (in the given order, then any other in the records), speed (ascending), latency
+    mode and release mode, the episodes' totals (over the episodes with status ok)."""
     out = []
-    for p in planners:
-        mine = [r for r in records if r["planner"] == p]
-        for v in sorted({float(r["speed_m_s"]) for r in mine if r.get("speed_m_s") is not None}):
-            rs = [r for r in mine if r.get("speed_m_s") is not None and float(r["speed_m_s"]) == v]
+    for p in _planner_order(records, planners):
+        mine = [r for r in records if r["planner"] == p and r.get("speed_m_s") is not None]
+        groups = sorted({(float(r["speed_m_s"]), _latency_mode(r), _release_mode(r)) for r in mine})
+        for v, lat, rel in groups:
+            rs = [r for r in mine if (float(r["speed_m_s"]), _latency_mode(r), _release_mode(r)) == (v, lat, rel)]
             ok = [r for r in rs if r.get("status") == "ok"]
             na = next((r["reason"] for r in rs if r.get("status") == "not_applicable"), "")
-            k, n = sum(r["cans_in_bin"] for r in ok), sum(r["cans_total"] for r in ok)
-            events = [e for r in ok for e in r.get("events", ()) if e["trigger"] in ("drift", "arrival")]
+            k, attempted = sum(r["cans_in_bin"] for r in ok), sum(r["cans_attempted"] for r in ok)
+            events = [e for r in ok for e in r.get("events", ()) if _deadline_bound(e)]
             spliced = [e for e in events if e["outcome"] == "spliced"]
             out.append(SpeedCell(
-                planner=p, speed_m_s=v, episodes=len(rs), cans_in_bin=k, cans_total=n, ci95=wilson_interval(k, n),
-                replans=sum(r["replans"] for r in ok), cans_attempted=sum(r["cans_attempted"] for r in ok),
+                planner=p, speed_m_s=v, episodes=len(rs), cans_in_bin=k, cans_total=sum(r["cans_total"] for r in ok),
+                ci95=wilson_interval(k, attempted),
+                replans=sum(r["replans"] for r in ok), cans_attempted=attempted,
                 deadline_misses=sum(r["deadline_misses"] for r in ok),
                 replan_failures=sum(r["replan_failures"] for r in ok),
                 latencies_s=tuple(e["latency_s"] for e in events),
                 contacts_bin=sum(r["contacts_bin"] for r in ok), contacts_person=sum(r["contacts_person"] for r in ok),
-                jump_q_rad=max((e["jump_q_rad"] for e in spliced), default=math.nan),
-                jump_v_rad_s=max((e["jump_v_rad_s"] for e in spliced), default=math.nan),
+                jump_q_rad=max((e["jump_q_rad"] for e in spliced if e.get("jump_q_rad") is not None),
+                               default=math.nan),
+                jump_v_rad_s=max((e["jump_v_rad_s"] for e in spliced if e.get("jump_v_rad_s") is not None),
+                                 default=math.nan),
                 grasp_to_release_s=tuple(c["grasp_to_release_s"] for r in ok for c in r.get("cans", ())
-                                         if c["released"]),
-                given_up=sum(r["cans_given_up"] for r in ok), not_applicable=na,
-                errors=sum(r.get("status") == "error" for r in rs)))
+                                         if c["released"] and c.get("grasp_to_release_s") is not None),
+                given_up=sum(r.get("cans_given_up", 0) for r in ok), not_applicable=na,
+                errors=sum(r.get("status") == "error" for r in rs),
+                latency_mode=lat, release_mode=rel,
+                splices=sum(r.get("splices", 0) for r in ok),
+                cans_released=sum(r.get("cans_released", 0) for r in ok),
+                not_attempted=sum(r["cans_not_attempted"] if r.get("cans_not_attempted") is not None
+                                  else max(0, r["cans_total"] - r["cans_attempted"]) for r in ok),
+                put_down=_total(ok, "cans_put_down"),
+                failures_by_stage=_stages(ok),
+                splices_at_rest=_total(ok, "splices_at_rest"),
+                splice_speeds_rad_s=_splice_speeds(ok),
+                releases_moving=_total(ok, "releases_moving"),
+                release_speeds_m_s=tuple(r["release_speed_median_m_s"] for r in ok
+                                         if r.get("release_speed_median_m_s") is not None),
+                near_misses_person=_total(ok, "near_misses_person"),
+                ssm_holds=_total(ok, "ssm_holds"),
+                person_min_distance_m=min((r["person_min_distance_m"] for r in ok
+                                           if r.get("person_min_distance_m") is not None), default=None)))
     return out
 
 
@@ -103,34 +220,314 @@ def _q(values: Sequence[float], q: float) -> float:
     return float(np.quantile(values, q)) if len(values) else math.nan
 
 
+def stages_cell(stages: dict[str, int] | None) -> str:
+    """{"goal_ik": 3, "join": 1, "planner": 2} -> "ik 3, join 1, planner 2" (the replan's order; zeros left out)."""
+    if stages is None:
+        return "-"
+    names = [s for s in STAGES if s in stages] + sorted(s for s in stages if s not in STAGES)
+    parts = [f"{STAGE_SHORT.get(s, s)} {stages[s]}" for s in names if stages[s]]
+    return ", ".join(parts) if parts else "0"
+
+
+def _or_dash(v: Any) -> str:
+    return "-" if v is None else str(v)
+
+
+def _fraction_cell(c: SpeedCell) -> str:
+    """"9/10 (90% [60, 98])": cans in the bin of those attempted, the rate and its Wilson interval."""
+    if not c.cans_attempted:
+        return "-"
+    lo, hi = c.ci95
+    return f"{c.cans_in_bin}/{c.cans_attempted} ({100 * c.rate:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}])"
+
+
 def moving_bin_rows(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
                     ) -> tuple[list[str], list[list[Any]]]:
-    """The table's headers and rows (one per planner and speed)."""
-    headers = ["planner", "speed (m/s)", "episodes", "cans in bin", "replans / can", "latency median / p95 (s)",
-               "missed", "failed", "gave up", "contacts bin / person", "jump (rad, rad/s)", "grasp-release (s)",
-               "errors"]
+    """The main table's headers and rows: one per planner and speed (and latency and release mode
+    when the run has more than one of either; their columns only then).
+
+    A column for a field that no record carries (an older moving_bin.json) is left out."""
+    cells = speed_cells(records, planners=planners)
+    modes_lat = len({c.latency_mode for c in cells}) > 1
+    modes_rel = len({c.release_mode for c in cells}) > 1
+    ran = [c for c in cells if c.cans_total or not c.not_applicable]
+
+    def shown(attr: str) -> bool:
+        return any(getattr(c, attr) is not None for c in ran)
+
+    show_not_attempted = any(c.not_attempted for c in ran)
+    show_put_down, show_stages, show_rest = shown("put_down"), shown("failures_by_stage"), shown("splices_at_rest")
+    show_splice_speed = any(c.splice_speeds_rad_s for c in ran)
+    show_moving = shown("releases_moving")
+    show_person = shown("near_misses_person") or shown("ssm_holds")
+    columns: list[tuple[str, Any]] = [
+        ("planner", lambda c: c.planner),
+        ("speed (m/s)", lambda c: format_number(c.speed_m_s)),
+    ]
+    if modes_lat:
+        columns.append(("latency", lambda c: c.latency_mode))
+    if modes_rel:
+        columns.append(("release", lambda c: c.release_mode))
+    columns += [
+        ("episodes", lambda c: f"{c.episodes} ({c.errors} error{'s' * (c.errors != 1)})" if c.errors else c.episodes),
+        ("cans in bin / attempted", _fraction_cell),
+    ]
+    if show_not_attempted:
+        columns.append(("not attempted", lambda c: c.not_attempted))
+    if show_put_down:
+        columns.append(("given up (put down)", lambda c: f"{c.given_up} ({_or_dash(c.put_down)})"))
+    else:
+        columns.append(("given up", lambda c: c.given_up))
+    columns += [
+        ("replans / can", lambda c: format_number(c.replans_per_can)),
+        ("latency median / p95 (s)", lambda c: f"{format_number(_q(c.latencies_s, 0.5))} / "
+                                               f"{format_number(_q(c.latencies_s, 0.95))}" if c.latencies_s else "-"),
+        ("missed / failed", lambda c: f"{c.deadline_misses} / {c.replan_failures}"),
+    ]
+    if show_stages:
+        columns.append(("failed by stage", lambda c: stages_cell(c.failures_by_stage)))
+    if show_rest:
+        columns.append(("splices (at rest)", lambda c: f"{c.splices} ({_or_dash(c.splices_at_rest)})"))
+    else:
+        columns.append(("splices", lambda c: c.splices))
+    if show_splice_speed:
+        columns.append(("splice speed (rad/s)", lambda c: format_number(_q(c.splice_speeds_rad_s, 0.5))
+                        if c.splice_speeds_rad_s else "-"))
+    if show_moving:
+        columns.append(("released moving / released", lambda c: f"{_or_dash(c.releases_moving)} / {c.cans_released}"))
+    columns.append(("contacts bin / person", lambda c: f"{c.contacts_bin} / {c.contacts_person}"))
+    if show_person:
+        columns.append(("person near misses / SSM holds",
+                        lambda c: f"{_or_dash(c.near_misses_person)} / {_or_dash(c.ssm_holds)}"))
+    columns += [
+        ("jump (rad, rad/s)", lambda c: f"{format_number(c.jump_q_rad)}, {format_number(c.jump_v_rad_s)}"
+         if math.isfinite(c.jump_q_rad) else "-"),
+        ("grasp-release (s)", lambda c: format_number(_q(c.grasp_to_release_s, 0.5)) if c.grasp_to_release_s else "-"),
+    ]
+    headers = [h for h, _ in columns]
+    lead = 3 + modes_lat + modes_rel  # planner, speed, the modes, episodes
     rows = []
-    for c in speed_cells(records, planners=planners):
+    for c in cells:
         if c.not_applicable and not c.cans_total:
-            rows.append([c.planner, format_number(c.speed_m_s), c.episodes, f"not applicable: {c.not_applicable}",
-                         *["-"] * 8, c.errors])
+            row = [f(c) for _, f in columns[:lead]]
+            rows.append([*row, f"not applicable: {c.not_applicable}", *["-"] * (len(columns) - lead - 1)])
             continue
-        lo, hi = c.ci95
-        rows.append([
-            c.planner, format_number(c.speed_m_s), c.episodes,
-            f"{c.cans_in_bin}/{c.cans_total} ({100 * c.rate:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}])"
-            if c.cans_total else "-",
-            format_number(c.replans_per_can),
-            f"{format_number(_q(c.latencies_s, 0.5))} / {format_number(_q(c.latencies_s, 0.95))}"
-            if c.latencies_s else "-",
-            c.deadline_misses, c.replan_failures, c.given_up, f"{c.contacts_bin} / {c.contacts_person}",
-            f"{format_number(c.jump_q_rad)}, {format_number(c.jump_v_rad_s)}" if math.isfinite(c.jump_q_rad) else "-",
-            format_number(_q(c.grasp_to_release_s, 0.5)) if c.grasp_to_release_s else "-",
-            c.errors,
-        ])
+        rows.append([f(c) for _, f in columns])
     return headers, rows
+
+
+# --- paired differences -------------------------------------------------------------------------
+
+def episode_key(r: dict[str, Any]) -> tuple:
+    """What every planner meets in the same way: the scene, the bin path, the speed and the modes."""
+    return (r.get("variant"), r.get("scene_seed"), r.get("bin_seed"), int(r.get("path_index") or 0),
+            float(r["speed_m_s"]), _latency_mode(r), _release_mode(r))
+
+
+@dataclasses.dataclass(frozen=True)
+class PairedDifference:
+    """Planner A minus planner B in cans in the bin per can attempted, over the episodes both ran.
+
+    speed_m_s, latency_mode, release_mode are None on the row pooling them all. mean_pp and ci_pp
+    (percentage points) are None with fewer than 2 episodes."""
+
+    planner_a: str
+    planner_b: str
+    speed_m_s: float | None
+    latency_mode: str | None
+    release_mode: str | None
+    n: int
+    mean_pp: float | None
+    ci_pp: tuple[float, float] | None
+    a_ahead: int = 0
+    b_ahead: int = 0
+
+    @property
+    def established(self) -> bool | None:
+        if self.ci_pp is None:
+            return None
+        return self.ci_pp[0] > 0 or self.ci_pp[1] < 0
+
+
+def bootstrap_mean_ci(d: np.ndarray, *, n_resamples: int = N_RESAMPLES, seed: int = BOOTSTRAP_SEED,
+                      level: float = 0.95) -> tuple[float, float]:
+    """Percentile-bootstrap interval of the mean of d, resampling its entries (default_rng(seed))."""
+    d = np.asarray(d, float)
+    rng = np.random.default_rng(seed)
+    means = np.empty(n_resamples)
+    chunk = max(1, min(n_resamples, 2_000_000 // max(len(d), 1)))
+    for start in range(0, n_resamples, chunk):
+        stop = min(n_resamples, start + chunk)
+        means[start:stop] = d[rng.integers(0, len(d), size=(stop - start, len(d)))].mean(axis=1)
+    alpha = (1 - level) / 2
+    lo, hi = np.quantile(means, [alpha, 1 - alpha])
+    return float(lo), float(hi)
+
+
+def _episode_rates(records: Sequence[dict[str, Any]], planner: str) -> dict[tuple, float]:
+    """Cans in the bin per can attempted per episode key (ok episodes with a can attempted; a key
+    met twice takes the mean)."""
+    by_key: dict[tuple, list[float]] = {}
+    for r in records:
+        if r["planner"] == planner and r.get("status") == "ok" and r.get("cans_attempted") \
+                and r.get("speed_m_s") is not None:
+            by_key.setdefault(episode_key(r), []).append(r["cans_in_bin"] / r["cans_attempted"])
+    return {k: float(np.mean(v)) for k, v in by_key.items()}
+
+
+def _difference(a: str, b: str, keys: Sequence[tuple], ra: dict, rb: dict, group: tuple) -> PairedDifference:
+    d = np.array([ra[k] - rb[k] for k in keys])
+    ahead = (int((d > 0).sum()), int((d < 0).sum()))
+    if len(d) < 2:
+        return PairedDifference(a, b, *group, len(d), None, None, *ahead)
+    lo, hi = bootstrap_mean_ci(d)
+    return PairedDifference(a, b, *group, len(d), 100 * float(d.mean()), (100 * lo, 100 * hi), *ahead)
+
+
+def paired_differences(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
+                       ) -> list[PairedDifference]:
+    """Every pair of planners (A before B in the given order) at every speed (and modes) where they
+    share episodes, then pooled over them all (when there is more than one)."""
+    order = _planner_order(records, planners)
+    rates = {p: _episode_rates(records, p) for p in order}
+    out = []
+    for a, b in itertools.combinations([p for p in order if rates[p]], 2):
+        shared = sorted(set(rates[a]) & set(rates[b]), key=repr)
+        if not shared:
+            continue
+        groups = sorted({(k[4], k[5], k[6]) for k in shared})
+        for g in groups:
+            out.append(_difference(a, b, [k for k in shared if (k[4], k[5], k[6]) == g], rates[a], rates[b], g))
+        if len(groups) > 1:
+            out.append(_difference(a, b, shared, rates[a], rates[b], (None, None, None)))
+    return out
+
+
+def _pp(v: float) -> str:
+    return f"{v:+.1f}" if abs(v) >= 0.05 else "0.0"
+
+
+def paired_rows(records: Sequence[dict[str, Any]], planners: Sequence[str] | None = None
+                ) -> tuple[list[str], list[list[Any]]]:
+    """The paired table: per pair of planners and speed, episodes paired, mean difference (pp), its
+    95% bootstrap interval, established. No rows when no two planners share an episode."""
+    diffs = paired_differences(records, planners=planners)
+    per_group = [d for d in diffs if d.speed_m_s is not None]
+    modes_lat = len({d.latency_mode for d in per_group}) > 1
+    modes_rel = len({d.release_mode for d in per_group}) > 1
+    headers = ["A - B", "speed (m/s)", *(["latency"] if modes_lat else []), *(["release"] if modes_rel else []),
+               "episodes paired", "A ahead / B ahead", "mean difference (pp)", "95% interval (pp)", "established"]
+    rows = []
+    for d in diffs:
+        pooled = d.speed_m_s is None
+        row = [f"{d.planner_a} - {d.planner_b}", "all" if pooled else format_number(d.speed_m_s)]
+        if modes_lat:
+            row.append("all" if pooled else d.latency_mode)
+        if modes_rel:
+            row.append("all" if pooled else d.release_mode)
+        row += [d.n, f"{d.a_ahead} / {d.b_ahead}"]
+        if d.ci_pp is None:
+            row += ["-", "-", "-"]
+        else:
+            row += [_pp(d.mean_pp), f"[{_pp(d.ci_pp[0])}, {_pp(d.ci_pp[1])}]", "yes" if d.established else "no"]
+        rows.append(row)
+    return headers, rows
+
+
+# --- latency per step ---------------------------------------------------------------------------
+
+def latency_caption(source: set[str]) -> str:
+    how = {
+        "events": "from every deadline-bound replan's own step times (its event's parts_s), pooled over the episodes",
+        "episodes": "from the episodes' own summaries (latency_parts_s), as the median of their medians / the "
+                    "largest of their p95s (the events carried no step times)",
+    }
+    return ("Replan latency per step (ms, median / p95), per planner pooled over speeds, over the episodes with "
+            "measured latency; " + "; or ".join(how[s] for s in ("events", "episodes") if s in source)
+            + ". Total: the replan's whole wall time. Not shown for modelled latency (a declared constant).")
+
+
+def _steps_in(tables: Sequence[dict[str, Any]]) -> list[str]:
+    seen = list(dict.fromkeys(k for t in tables for k in t))
+    return [s for s in STEPS if s in seen] + [s for s in seen if s not in STEPS]
+
+
+def latency_table(records: Sequence[dict[str, Any]], planners: Sequence[str] | None = None
+                  ) -> tuple[list[str], list[list[Any]], set[str]]:
+    """The per-step latency table (headers, rows) and where its numbers come from ("events",
+    "episodes"); no rows when no measured-latency record has step times."""
+    measured = [r for r in records if r.get("status") == "ok" and _latency_mode(r) == "measured"]
+    per_planner: dict[str, tuple[str, dict[str, list[float]], list[float], int]] = {}
+    for p in _planner_order(measured, planners):
+        rs = [r for r in measured if r["planner"] == p]
+        events = [e for r in rs for e in r.get("events", ()) if _deadline_bound(e) and e.get("parts_s")]
+        if events:
+            steps = {s: [e["parts_s"][s] for e in events if e["parts_s"].get(s) is not None]
+                     for s in _steps_in([e["parts_s"] for e in events])}
+            per_planner[p] = ("events", steps, [e["latency_s"] for e in events], len(events))
+            continue
+        summaries = [r for r in rs if r.get("latency_parts_s")]
+        if summaries:
+            tables = [r["latency_parts_s"] for r in summaries]
+            steps = {s: [t[s] for t in tables if t.get(s) is not None] for s in _steps_in(tables)}
+            total = [(r["replan_latency_median_s"], r.get("replan_latency_p95_s")) for r in summaries
+                     if r.get("replan_latency_median_s") is not None]
+            per_planner[p] = ("episodes", steps, total, len(summaries))
+    if not per_planner:
+        return [], [], set()
+    all_steps = _steps_in([dict.fromkeys(s) for _, s, _, _ in per_planner.values()])
+
+    def ms(v: float) -> str:
+        return format_number(1000 * v)
+
+    def cell(source: str, values: list) -> str:
+        if not values:
+            return "-"
+        if source == "events":
+            return f"{ms(_q(values, 0.5))} / {ms(_q(values, 0.95))}"
+        med = [v[0] for v in values]
+        p95 = [v[1] for v in values if v[1] is not None]
+        return f"{ms(_q(med, 0.5))} / {ms(max(p95)) if p95 else 'n/a'}"
+
+    headers = ["planner", "over", *all_steps, "total"]
+    rows = []
+    for p, (source, steps, total, n) in per_planner.items():
+        over = f"{n} replans" if source == "events" else f"{n} episodes"
+        rows.append([p, over, *(cell(source, steps.get(s, [])) for s in all_steps), cell(source, total)])
+    return headers, rows, {s for s, _, _, _ in per_planner.values()}
+
+
+def latency_rows(records: Sequence[dict[str, Any]], planners: Sequence[str] | None = None
+                 ) -> tuple[list[str], list[list[Any]]]:
+    """Per planner, the median / p95 of each step of the deadline-bound replans (ms); see `latency_table`."""
+    headers, rows, _ = latency_table(records, planners)
+    return headers, rows
+
+
+# --- the section --------------------------------------------------------------------------------
+
+def moving_bin_tables(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
+                      ) -> list[tuple[str, list[str], list[list[Any]]]]:
+    """The section's tables in order, each as (caption, headers, rows): the main one (no caption:
+    the section's text is its caption), the paired differences and the latency per step (each
+    only when it has rows)."""
+    out = [("", *moving_bin_rows(records, planners=planners))]
+    headers, rows = paired_rows(records, planners)
+    if rows:
+        out.append((PAIRED_CAPTION, headers, rows))
+    headers, rows, source = latency_table(records, planners)
+    if rows:
+        out.append((latency_caption(source), headers, rows))
+    return out
 
 
 def moving_bin_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None,
                      tablefmt: str = "github") -> str:
-    return tabulate(*reversed(moving_bin_rows(records, planners=planners)), tablefmt=tablefmt)
+    """The main table, then (each after its caption) the paired differences and the latency per step."""
+    parts = []
+    for i, (caption, headers, rows) in enumerate(moving_bin_tables(records, planners=planners)):
+        if caption:
+            parts.append(caption)
+        # the main table's numbers align as numbers; the others' cells are text ("+12.5" keeps its sign)
+        parts.append(tabulate(rows, headers, tablefmt=tablefmt, disable_numparse=i > 0))
+    return "\n\n".join(parts)

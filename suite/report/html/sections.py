@@ -277,16 +277,19 @@ def execution_html(run_dir: Path, executions: Sequence[dict[str, Any]], planners
 
 
 def moving_bin_html(run_dir: Path, records: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:
-    """moving_bin.json's table, its figure and the episodes' Meshcat replays."""
-    from suite.report.summary_moving_bin import MOVING_BIN_INTRO, moving_bin_rows
+    """moving_bin.json's tables (per planner and speed; planners paired over shared episodes; latency
+    per step), its figure and the episodes' Meshcat replays."""
+    from suite.report.summary_moving_bin import MOVING_BIN_INTRO, moving_bin_tables
 
     text = MOVING_BIN_INTRO.split("\n", 2)[2]  # without its markdown heading
     replays = sorted(run_dir.glob("replay_moving_bin_*.html"))
     links = "".join(f'<li><a href="{esc(p.name)}">{esc(p.name)}</a> ({p.stat().st_size / 1e6:.1f} MB)</li>'
                     for p in replays)
+    tables = "".join((inline_md(caption) if caption else "") + table(headers, rows)
+                     for caption, headers, rows in moving_bin_tables(records, planners=planners))
     return "".join([
-        inline_md(" ".join(text.split("\n"))),
-        table(*moving_bin_rows(records, planners=planners)),
+        inline_md(text),
+        tables,
         figures(run_dir, "moving_bin"),
         f"<p>One episode per planner (Meshcat, open beside this file; the bin and the person move):</p><ul>{links}</ul>"
         if links else "",
