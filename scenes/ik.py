@@ -28,6 +28,10 @@ class IkOptions:
     near_sigmas_rad: tuple[float, ...] = (0.1, 0.25, 0.5)
     restarts: int = 4
     major_iterations: int = 150
+    #: The rotation about the world's vertical is free (the gripper's axis that X_WG points
+    #: straight down keeps pointing down within the orientation tolerance): a drop over a bin, where
+    #: the yaw does not matter.
+    free_yaw: bool = False
 
 
 class PoseIk:
@@ -74,8 +78,14 @@ class PoseIk:
         tol = np.full(3, options.position_tolerance_m)
         ik.AddPositionConstraint(self.G, np.zeros(3), self.plant.world_frame(),
                                  X.translation() - tol, X.translation() + tol)
-        ik.AddOrientationConstraint(self.G, RotationMatrix(), self.plant.world_frame(),
-                                    X.rotation(), options.orientation_tolerance_rad)
+        if options.free_yaw:
+            down = np.array([0.0, 0.0, -1.0])
+            ik.AddAngleBetweenVectorsConstraint(self.plant.world_frame(), down, self.G,
+                                                X.rotation().inverse().multiply(down), 0.0,
+                                                options.orientation_tolerance_rad)
+        else:
+            ik.AddOrientationConstraint(self.G, RotationMatrix(), self.plant.world_frame(),
+                                        X.rotation(), options.orientation_tolerance_rad)
         ik.AddMinimumDistanceLowerBoundConstraint(options.min_distance_m,
                                                   options.influence_distance_m)
         prog = ik.get_mutable_prog()

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -30,9 +30,11 @@ if TYPE_CHECKING:
 #: The families a moving bin runs on: the paper's station and its wall variant.
 MOVING_BIN_FAMILIES = ("open", "wall")
 #: The default region around the spec's bin centre: its lower and upper corners' offsets (m). It
-#: reaches further toward the robot base, where the arm still reaches the drop pose (on open and
-#: wall: x 0.20..0.46, y 0.40..0.62; 2 cm more outward leaves the far corner out of reach).
-DEFAULT_REGION_OFFSETS_M = ((-0.16, -0.12), (0.10, 0.10))
+#: reaches further toward the robot base, where the arm still reaches the drop pose holding a can
+#: (on open and wall: x 0.20..0.44, y 0.40..0.60). At 0.46, 0.62 (the region of the first moving
+#: bin runs) the drop pose with the first can of the scene in the gripper has no IK at the goals' 2 mm
+#: clearance (8 random restarts, yaw free; found at 1 cm inward on open and wall, seeds 5 and 77).
+DEFAULT_REGION_OFFSETS_M = ((-0.16, -0.12), (0.08, 0.08))
 #: The bin path's sample spacing (s) and length (s); beyond it the bin stands at its last place.
 PATH_DT_S = 0.01
 PATH_HORIZON_S = 900.0
@@ -51,7 +53,9 @@ class MovingBinScenario:
         region_m: the box its centre stays in, ((x_lo, y_lo), (x_hi, y_hi)) in metres; None for
             the spec's bin centre offset by DEFAULT_REGION_OFFSETS_M. It must hold the spec's bin
             centre.
-        seed: the seed of the path's target points and of the estimate noise.
+        seed: the scenario's seed; an episode's bin path (target points) and estimate noise draw
+            from `suite.execution.moving_bin_records.episode_seed` of it, the run seed, the scene
+            and the path's index (every episode its own path, the same for every planner).
         person_radius_m, person_height_m: the standing cylinder holding the bin.
         person_gap_m: its gap to the bin's outer wall, on the side away from the robot base.
         estimate_latency_s: delay of the bin estimate (sensing + processing).
@@ -60,11 +64,37 @@ class MovingBinScenario:
         velocity_window: estimates a constant-velocity prediction fits its line to (least
             squares; the last one alone when there is one).
         drift_tolerance_m: a predicted drop position this far from the planned one triggers a
-            replan.
-        replan_deadline_s: a replan's wall-time deadline; its plan is spliced in this long after
-            the replan starts, from the state the current plan commands then.
+            replan while the arrival is `drift_horizon_s` or more away; closer to it the
+            tolerance shrinks linearly with the time to go, down to `drift_tolerance_min_m` on
+            arrival (far out, a prediction is coarse and a correction cheap; near the release it
+            must be fine).
+        replan_deadline_s: in "measured" latency mode, a replan's wall-time deadline: its plan
+            is spliced in this long after the replan starts, from the state the current plan
+            commands then; a plan ready later is dropped (the current plan goes on).
+        latency_mode: "measured": every plan's latency is its wall time on this machine (the
+            planner's budget is what is left of the deadline); "modelled": every plan's latency
+            is the planner's declared constant (`modelled_latency_s`, else the loop's
+            calibrated table `suite.execution.moving_bin.MODELLED_LATENCY_S`), the splice is that
+            long after the replan starts, and planners finish by their own criteria and seeds
+            (their budget is the run's time limit, a cap), so a run gives the same records on
+            any machine.
+        modelled_latency_s: per planner name, its declared latency (s) in "modelled" mode.
         max_wait_s: how long the arm may hold over (or near) the bin waiting for a release or a
-            plan before it stops safely and the can counts as not delivered.
+            plan before it gives the can up.
+        can_time_limit_s: a can's time from its grasp to its release, in every phase (transit,
+            chasing, waiting); past it the can is given up: put back down where it was picked,
+            and the episode goes on with the next can.
+        release: "moving": on arrival the gripper accelerates to the bin's estimated velocity
+            over `track_ramp_s` and follows it while the fingers open (the can falls with the
+            bin's velocity: it lands where the bin will be); the transit aims ahead of the
+            predicted bin by the ramp's lag. "rest": the arm releases standing still, when the
+            bin is under it now and at the end of the opening.
+        track_ramp_s: the release's acceleration to the bin's velocity.
+        person_margin_m: every new plan keeps this far from the person along its timing (a swept
+            check against the person's predicted positions).
+        ssm: speed-and-separation monitoring: the arm makes a protective stop when the person
+            is nearer than the protective separation distance (`suite.execution.person`).
+        near_miss_m: a pass of the robot this close to the person (true positions) is a near miss.
         release_margin_m: the can's centre must be this far inside the bin's inner walls (besides
             the can's radius) for a release.
         bin_mass_kg, person_mass_kg: the driven body's masses (heavy: the arm hardly moves it).
@@ -84,8 +114,18 @@ class MovingBinScenario:
     estimate_noise_m: NonNeg = 0.003
     velocity_window: PosInt = 5
     drift_tolerance_m: Pos = 0.04
+    drift_tolerance_min_m: Pos = 0.01
+    drift_horizon_s: Pos = 1.0
     replan_deadline_s: Pos = 0.3
+    latency_mode: Literal["measured", "modelled"] = "measured"
+    modelled_latency_s: dict[str, Pos] | None = None
     max_wait_s: Pos = 3.0
+    can_time_limit_s: Pos = 20.0
+    release: Literal["moving", "rest"] = "moving"
+    track_ramp_s: Pos = 0.15
+    person_margin_m: NonNeg = 0.05
+    ssm: bool = True
+    near_miss_m: Pos = 0.05
     release_margin_m: NonNeg = 0.01
     bin_mass_kg: Pos = 20.0
     person_mass_kg: Pos = 70.0
@@ -101,7 +141,13 @@ class MovingBinScenario:
     def to_json(self) -> dict:
         d = dataclasses.asdict(self)
         d["region_m"] = None if self.region_m is None else [list(c) for c in self.region_m]
+        d["modelled_latency_s"] = None if self.modelled_latency_s is None else dict(self.modelled_latency_s)
         return d
+
+    def drift_tolerance(self, time_to_go_s: float) -> float:
+        """The drift that triggers a replan with `time_to_go_s` left to the arrival (m)."""
+        f = min(max(time_to_go_s / self.drift_horizon_s, 0.0), 1.0)
+        return self.drift_tolerance_min_m + f * max(self.drift_tolerance_m - self.drift_tolerance_min_m, 0.0)
 
 
 def make_scenario(values: dict | None = None, *, where: str = "moving bin scenario: ") -> MovingBinScenario:

@@ -82,9 +82,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--moving-bin-scenes", type=positive_int, default=2, metavar="N",
                    help="with --moving-bin: how many of the run's open and wall scenes (an open, then a wall, ...; "
                         "default 2)")
+    p.add_argument("--moving-bin-paths", type=positive_int, default=1, metavar="K",
+                   help="with --moving-bin: bin paths per scene, each seeded from the run seed, the scene and its "
+                        "index, the same for every planner (default 1)")
     p.add_argument("--moving-bin-scenario", default=None, metavar="YAML",
                    help="with --moving-bin: the scenario's other settings (scenes.moving_bin.MovingBinScenario: "
-                        "acceleration, region, estimate latency/rate/noise, drift tolerance, replan deadline, ...)")
+                        "acceleration, region, estimate latency/rate/noise, drift tolerance, replan deadline, "
+                        "latency_mode measured|modelled, release moving|rest, ...)")
     p.add_argument("--no-plots", action="store_true", help="skip drawing the plots")
     p.add_argument("--wide", action="store_true",
                    help="print every metric with its quartiles in the terminal table (about 250 columns)")
@@ -349,23 +353,29 @@ def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, prog
     write_execution(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar))
 
 
-def _execute_moving_bin(trials, out: Path, config: CompareConfig, *, speeds, scenario, scenes: int,
+def _execute_moving_bin(trials, out: Path, config: CompareConfig, *, speeds, scenario, scenes: int, paths: int,
                         progress_bar: bool) -> None:
-    """The moving-bin sweep: every planner on the run's first open and wall scenes at every speed;
-    write moving_bin.json (and a replay of each planner's episode on the first scene at the middle
-    speed)."""
-    from suite.execution.jobs import run_jobs
-    from suite.execution.jobs import write_moving_bin
+    """The moving-bin sweep: every planner on the run's first open and wall scenes, on `paths` bin
+    paths each, at every speed; write moving_bin.json (and a replay of each planner's episode on
+    the first scene at the middle speed); the manifest records the scenario (its latency mode)."""
+    from suite.execution.jobs import run_jobs, write_moving_bin
     from suite.execution.moving_bin import run_moving_bin_job, sweep_jobs
+    from suite.execution.moving_bin_records import modelled_latency
+    from suite.run.runner import update_manifest
 
     mine = [t for t in trials if t.problem.scene.variant in ("open", "wall")]
     base = _execution_jobs(mine, out, config, reperceive=False, replay_dir=None)
     replay_speed = speeds[len(speeds) // 2]
-    jobs = sweep_jobs(base, speeds=speeds, scenario=scenario, scenes=scenes, replay_dir=out,
+    jobs = sweep_jobs(base, speeds=speeds, scenario=scenario, scenes=scenes, paths=paths, replay_dir=out,
                       replay_speed=replay_speed)
     n_scenes = len({j.scene.key() for j in jobs})
-    print(f"moving bin: {len(jobs)} episode(s) ({n_scenes} scene(s) x {len(speeds)} speed(s) x "
-          f"{len(config.planners)} planner(s))...", file=sys.stderr)
+    latency = {p: modelled_latency(scenario, p) for p in config.planners} if scenario.latency_mode == "modelled" \
+        else None
+    update_manifest(out, moving_bin={"speeds_m_s": list(speeds), "scenes": n_scenes, "paths_per_scene": paths,
+                                     "latency_mode": scenario.latency_mode, "modelled_latency_s": latency,
+                                     "scenario": scenario.to_json()})
+    print(f"moving bin: {len(jobs)} episode(s) ({n_scenes} scene(s) x {paths} bin path(s) x {len(speeds)} speed(s) "
+          f"x {len(config.planners)} planner(s), latency {scenario.latency_mode})...", file=sys.stderr)
     write_moving_bin(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar, run=run_moving_bin_job,
                                    desc="moving bin"))
 
@@ -507,7 +517,8 @@ def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path, *, s
               "planning wall time in all; summary.md names them", file=sys.stderr)
     if scenario is not None:
         _execute_moving_bin(trials, out, config, speeds=args.moving_bin, scenario=scenario,
-                            scenes=args.moving_bin_scenes, progress_bar=not args.no_progress)
+                            scenes=args.moving_bin_scenes, paths=args.moving_bin_paths,
+                            progress_bar=not args.no_progress)
     elif args.execute or args.reperceive:
         _execute(trials, out, config, reperceive=args.reperceive, progress_bar=not args.no_progress)
     from suite.report.write import write_report

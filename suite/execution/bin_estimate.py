@@ -47,17 +47,28 @@ class BinEstimator:
             return [self._sample(0)] if t_s >= 0 else []
         return [self._sample(i) for i in range(max(0, k - self._s.velocity_window + 1), k + 1)]
 
-    def predict(self, t_now_s: float, t_at_s: float) -> np.ndarray:
-        """Where the bin centre will be at t_at_s (2,), from the estimates available at t_now_s."""
+    def _fit(self, t_now_s: float) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """The least-squares line through the available estimates: (xy at tm, velocity, tm)."""
         est = self.estimates(t_now_s)
         if not est:
-            return self._path.at(0.0)[0].copy()  # before any estimate: where the bin was placed
+            return None
         if len(est) == 1:
-            xy = est[0][1]
-        else:
-            t = np.array([e[0] for e in est])
-            P = np.array([e[1] for e in est])
-            tm = t.mean()
-            v = ((t - tm)[:, None] * (P - P.mean(axis=0))).sum(axis=0) / ((t - tm) ** 2).sum()
-            xy = P.mean(axis=0) + v * (t_at_s - tm)
-        return np.clip(xy, self._lo, self._hi)
+            return est[0][1], np.zeros(2), est[0][0]
+        t = np.array([e[0] for e in est])
+        P = np.array([e[1] for e in est])
+        tm = t.mean()
+        v = ((t - tm)[:, None] * (P - P.mean(axis=0))).sum(axis=0) / ((t - tm) ** 2).sum()
+        return P.mean(axis=0), v, tm
+
+    def predict(self, t_now_s: float, t_at_s: float) -> np.ndarray:
+        """Where the bin centre will be at t_at_s (2,), from the estimates available at t_now_s."""
+        fit = self._fit(t_now_s)
+        if fit is None:
+            return self._path.at(0.0)[0].copy()  # before any estimate: where the bin was placed
+        xy, v, tm = fit
+        return np.clip(xy + v * (t_at_s - tm), self._lo, self._hi)
+
+    def velocity(self, t_now_s: float) -> np.ndarray:
+        """The bin's estimated velocity (2,) m/s from the estimates available at t_now_s."""
+        fit = self._fit(t_now_s)
+        return np.zeros(2) if fit is None else fit[1].copy()

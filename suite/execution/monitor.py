@@ -77,6 +77,10 @@ def where(spec, p_WC_m: np.ndarray, bin_xy_m=None) -> str:
     return "elsewhere"
 
 
+#: Phases in which the fingers may touch the can of the cycle without carrying it: closing on it,
+#: reaching it, opening, and retreating from a can put back down (the moving bin's give-up).
+INTENDED_GRIP_PHASES = ("descend", "close", "open", "retreat")
+
 #: The driven bodies of a moving bin (`scenes.drake_scene._add_moving_bin`) by role.
 MOVING_ROLES = {"bin": "bin", "person": "person"}
 
@@ -115,8 +119,8 @@ class _Classifier:
             if rb in ("static", "bin", "person"):
                 return True
             # the fingers on the can they pick: while closing on it, carrying it (lift, transit; a
-            # moving bin's blends and waits), and opening
-            if rb == target and ra == "finger" and (segment.carrying or segment.phase in ("descend", "close", "open")):
+            # moving bin's blends and waits), opening, and leaving a can put back down
+            if rb == target and ra == "finger" and (segment.carrying or segment.phase in INTENDED_GRIP_PHASES):
                 return False
             return rb != target or ra != "finger"
         # Neither is the robot: only the carried can's contacts matter.
@@ -124,7 +128,8 @@ class _Classifier:
             other = rb if ra == target else ra
             if other in ("bin", "person"):
                 return True
-            return not (other == "static" and segment.phase == "lift" and self.name[b if ra == target else a] == "plate")
+            return not (other == "static" and segment.phase in ("lift", "put_down")
+                        and self.name[b if ra == target else a] == "plate")
         return False
 
 

@@ -136,7 +136,6 @@ class SsmSettings:
         uncertainty_m: Z_d + Z_r, the person's and the robot's position uncertainty: 3 mm estimate
             noise plus the constant-velocity prediction's error, rounded up to 1 cm.
         human_speed_m_s: v_h; None: the estimated speed of the bin (the person walks with it).
-        near_miss_m: a separation under this counts as a near miss (m).
         resume_hysteresis_m: after a hold, the robot goes again only at S_p plus this, so that
             it does not chatter at the boundary.
     """
@@ -145,7 +144,6 @@ class SsmSettings:
     intrusion_m: float = 0.0
     uncertainty_m: float = 0.01
     human_speed_m_s: float | None = None
-    near_miss_m: float = 0.05
     resume_hysteresis_m: float = 0.05
 
 

@@ -1,37 +1,48 @@
-"""One online plan of the moving-bin loop, the same for every planner: blend, goal IK, plan, validate, time.
+"""One online plan of the moving-bin loop, the same for every planner: goal, plan, join, validate.
 
 `plan_online` starts from the arm's commanded state at the splice time (q_s, v_s, a_s) and returns
-the motion to splice in there, or why there is none:
+the motion to splice in there, or why there is none (its `stage`):
 
 1. the world of the moment: the station with the bin (and the person beside it) where it is
    predicted to be (`scenes.moving_bin.spec_with_bin_at`);
-2. the stopping blend from (q_s, v_s, a_s) to rest at q_b (`suite.execution.splice`; nothing
-   when the arm is at rest);
-3. the goal: Drake's collision-aware IK of the drop pose over the predicted bin (as the dataset's
-   goals are posed: `scenes.ik.PoseIk`, near seeds around the previous goal first), or a given
-   configuration (the return's);
-4. the planner from q_b to the goal, with the budget left (a warm start: the path being executed);
-5. the suite's independent validator on blend + path (the blend's dense samples as a polyline,
+2. the goal ("goal_ik"): Drake's collision-aware IK of the drop pose over the predicted bin, its
+   yaw free (a can drops the same whichever way the gripper turns), seeded at the previous goal
+   (`scenes.ik.PoseIk`), or a given configuration (a return's, a put-down's);
+3. the planner ("planner") from q_s to the goal, with the budget left and a warm start: the path
+   being executed;
+4. the join ("join"): the path bent onto the arriving motion without stopping
+   (`suite.execution.splice.join_path`, timed by TOPP-RA from a moving start);
+5. the suite's independent validator ("validator") on the join's polyline (the blend's samples,
    then the path) in the python-fcl world of the moment;
-6. TOPP-RA timing of the path from rest.
+6. the person over the motion's timing ("person"): a swept check against the person's predicted
+   positions (the caller's `person_check`).
 
 Its wall time is the latency; every step counts in it (the worlds change with the bin, so building
 them is part of replanning). No step falls back to anything: a failure is the outcome, with its
-reason.
+stage and reason.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 from planners.base import PlanningProblem, PlanStatus, TaskWaypoint
-from scenes.moving_bin import MovingBinScenario, drop_pose, spec_with_bin_at
+from scenes.moving_bin import MovingBinScenario, drop_pose, region, spec_with_bin_at
 from scenes.scene import Scene
-from suite.execution.splice import BlendTrajectory, stopping_blend
+from suite.execution.splice import BlendTrajectory, join_path
+
+#: The online goal IK: the dataset goals' clearance, the yaw free, the previous goal and two seeds
+#: near it (no random restarts: a goal on another IK branch would swing the arm), and SNOPT's
+#: major iterations capped at 60 instead of the dataset's 150 (a failing seed otherwise spends
+#: 0.1-0.4 s: the goal IK's p95 in the measured runs; docs/moving-bin.md counts its failures).
+ONLINE_IK_ITERATIONS = 60
+
+#: The stages of an online plan, in order (a failure names its stage).
+STAGES = ("budget", "goal_ik", "planner", "join", "validator", "person")
 
 #: The paper's transit lasts 12 time units (`suite.problems.cycle.SCHEDULE`): the nominal
 #: waypoints of a replanned motion get times in proportion to their gripper distances at that rate.
@@ -44,13 +55,13 @@ class OnlinePlan:
 
     Attributes:
         ok: a validated, timed motion is ready (`blend` then `trajectory`).
-        reason: why not ("" when ok): "budget spent before planning", "no stopping blend within
-            the limits", "goal IK failed", "planner: STATUS (REASON)", "validator: REASON",
-            "timing: REASON".
+        reason: why not ("" when ok).
         latency_s: wall time of the whole of it.
-        parts_s: wall time per step (world, blend, ik, plan, validate, timing).
-        blend: the stopping blend (duration 0 from rest).
-        trajectory: the new motion from the blend's end, timed from rest.
+        parts_s: wall time per step (world, ik, plan, join, validate, person).
+        stage: where it failed (one of STAGES; "" when ok).
+        blend: the join's quintic (duration 0 from rest).
+        trajectory: the path's remainder from the blend's end, timed by TOPP-RA.
+        at_rest: the join ends at rest (no moving join was within the limits).
         q_goal: its goal; bin_xy_m: the bin centre it was planned for.
         planner_status: the planner's status (or "" if it did not run).
     """
@@ -59,9 +70,11 @@ class OnlinePlan:
     reason: str
     latency_s: float
     parts_s: dict[str, float]
+    stage: str = ""
     blend: BlendTrajectory | None = None
     trajectory: Any = None
     path: np.ndarray | None = None
+    at_rest: bool = False
     q_goal: np.ndarray | None = None
     bin_xy_m: np.ndarray | None = None
     planner_status: str = ""
@@ -93,6 +106,8 @@ def plan_online(
     q_goal_seed: np.ndarray | None = None,
     via: list[np.ndarray] | None = None,
     warm_start: np.ndarray | None = None,
+    person_check: Callable[[list], str | None] | None = None,
+    drop_offset_m: np.ndarray | None = None,
     rng: np.random.Generator,
 ) -> OnlinePlan:
     """Plan the motion to splice in at the commanded state (q_s, v_s, a_s) (module docstring).
@@ -102,20 +117,27 @@ def plan_online(
         template: the motion's problem as the cycle poses it (kind, scene, can, held can, opening,
             cans gone); its start, goal and waypoints are replaced here.
         bin_xy_m: where the bin is predicted to be when the motion ends.
-        budget_s: the wall time it may take in all (the replan deadline, or the planning budget of
-            a motion the arm waits for at rest).
-        q_goal: a fixed goal (the return's); None for the drop pose's IK, seeded at q_goal_seed.
+        budget_s: the wall time the planner may take, with the steps before it (the replan
+            deadline in measured mode; a generous cap when latency is modelled).
+        q_goal: a fixed goal (a return's, a put-down's); None for the drop pose's IK, seeded at
+            q_goal_seed.
         via: nominal gripper poses between the start and the goal (the task's middle waypoint
             while the arm has not passed it).
         warm_start: the path being executed (trajopt starts from it).
+        person_check: given the motion's pieces [blend, trajectory] (timed from the splice), why
+            it comes too close to the person, or None.
+        drop_offset_m: where the drop pose is aimed relative to the predicted bin centre (xy; the
+            release ramp's lag), zero by default.
         rng: the IK's restarts.
     """
     from planners.worlds import collision_world, drake_plan_scene
     from scenes.ik import IkOptions, PoseIk
     from scenes.robot_model import load_robot
     from suite.problems.cycle import GOAL_CLEARANCE_M
-    from suite.scoring.timing import time_parameterize
     from suite.scoring.validate import validate_path
+
+    ONLINE_IK = IkOptions(min_distance_m=GOAL_CLEARANCE_M, restarts=0, free_yaw=True, near_sigmas_rad=(0.05, 0.2),
+                          major_iterations=ONLINE_IK_ITERATIONS)
 
     t0 = time.perf_counter()
     parts: dict[str, float] = {}
@@ -126,35 +148,34 @@ def plan_online(
         parts[name] = now - mark[0]
         mark[0] = now
 
-    def done(ok: bool, reason: str, **kw) -> OnlinePlan:
-        return OnlinePlan(ok, reason, time.perf_counter() - t0, parts, **kw)
+    def done(ok: bool, stage: str, reason: str, **kw) -> OnlinePlan:
+        return OnlinePlan(ok, reason, time.perf_counter() - t0, parts, stage, bin_xy_m=bin_xy_m, **kw)
 
     robot = load_robot(template.scene.spec.robot)
     spec = template.scene.spec
     scene = Scene(spec_with_bin_at(scenario, spec, bin_xy_m), template.scene.seed, template.scene.cans)
     problem = template.with_(scene=scene)
+    q_s = np.asarray(q_s, float)
     lap("world")
-    blend = stopping_blend(q_s, v_s, a_s, v_lim=robot.velocity_limits_rad_s, a_lim=robot.acceleration_limits_rad_s2,
-                           q_lo=robot.lower_rad, q_hi=robot.upper_rad)
-    lap("blend")
-    if blend is None:
-        return done(False, "no stopping blend within the limits", bin_xy_m=bin_xy_m)
-    q_b = blend.q[-1].copy()
     X_goal = template.X_WG_goal
     if q_goal is None:
-        X_goal = drop_pose(spec, bin_xy_m)
+        # the aim stays over the bin's region: the bin never leaves it (and the arm's reach is
+        # checked over it, `scenes.moving_bin.check_scenario`)
+        lo, hi = region(scenario, spec)
+        aim = np.asarray(bin_xy_m, float) + (0.0 if drop_offset_m is None else np.asarray(drop_offset_m, float))
+        aim = np.clip(aim, lo, hi)
+        X_goal = drop_pose(spec, aim)
         ik = PoseIk(drake_plan_scene(problem))
-        q_goal = ik.solve(X_goal, q_seed=q_goal_seed if q_goal_seed is not None else q_b, rng=rng,
-                          options=IkOptions(min_distance_m=GOAL_CLEARANCE_M, restarts=0,
-                                            near_sigmas_rad=(0.05, 0.1, 0.25)))
+        q_goal = ik.solve(X_goal, q_seed=q_goal_seed if q_goal_seed is not None else q_s, rng=rng,
+                          options=ONLINE_IK)
         lap("ik")
         if q_goal is None:
-            return done(False, "goal IK failed", blend=blend, bin_xy_m=bin_xy_m)
+            return done(False, "goal_ik", f"goal IK failed (drop over {aim[0]:.3f}, {aim[1]:.3f} m)")
     left = budget_s - (time.perf_counter() - t0)
     if left <= 0:
-        return done(False, "budget spent before planning", blend=blend, bin_xy_m=bin_xy_m)
-    waypoints = _waypoints(robot, q_b, [*(via or []), X_goal], template.waypoints[0].t)
-    problem = problem.with_(q_start=q_b, q_goal=np.asarray(q_goal, float), X_WG_goal=X_goal, waypoints=waypoints,
+        return done(False, "budget", "budget spent before planning", q_goal=q_goal)
+    waypoints = _waypoints(robot, q_s, [*(via or []), X_goal], template.waypoints[0].t)
+    problem = problem.with_(q_start=q_s, q_goal=np.asarray(q_goal, float), X_WG_goal=X_goal, waypoints=waypoints,
                             time_limit_s=left, warm_start=warm_start, pre_status=None)
     planner.prepare(problem)
     result = planner.plan(problem)
@@ -162,20 +183,23 @@ def plan_online(
     status = PlanStatus(result.status).value
     if result.status != PlanStatus.SUCCESS or result.path is None:
         why = result.stats.get("reason") or result.stats.get("reason_code") or ""
-        return done(False, f"planner: {status}" + (f" ({why})" if why else ""), blend=blend, bin_xy_m=bin_xy_m,
-                    q_goal=q_goal, planner_status=status)
+        return done(False, "planner", f"planner: {status}" + (f" ({why})" if why else ""), q_goal=q_goal,
+                    planner_status=status)
     path = np.asarray(result.path, float)
-    polyline = np.vstack([blend.q[:-1], path]) if blend.duration_s > 0 else path
+    join = join_path(q_s, v_s, a_s, path, robot=robot)
+    lap("join")
+    if join is None:
+        return done(False, "join", "no join of the path onto the motion within the limits", q_goal=q_goal,
+                    planner_status=status)
     world = collision_world(problem)
-    reason = validate_path(problem.with_(q_start=np.asarray(q_s, float)), polyline, world)
+    reason = validate_path(problem, join.polyline, world)
     lap("validate")
     if reason is not None:
-        return done(False, f"validator: {reason}", blend=blend, bin_xy_m=bin_xy_m, q_goal=q_goal,
-                    planner_status=status)
-    timed = time_parameterize(path, robot=robot)
-    lap("timing")
-    if not timed.ok:
-        return done(False, f"timing: {timed.reason}", blend=blend, bin_xy_m=bin_xy_m, q_goal=q_goal,
-                    planner_status=status)
-    return done(True, "", blend=blend, trajectory=timed, path=path, q_goal=np.asarray(q_goal, float),
-                bin_xy_m=np.asarray(bin_xy_m, float), planner_status=status)
+        return done(False, "validator", f"validator: {reason}", q_goal=q_goal, planner_status=status)
+    if person_check is not None:
+        reason = person_check([join.blend, join.trajectory])
+        lap("person")
+        if reason is not None:
+            return done(False, "person", f"person: {reason}", q_goal=q_goal, planner_status=status)
+    return done(True, "", "", blend=join.blend, trajectory=join.trajectory, path=path, at_rest=join.at_rest,
+                q_goal=np.asarray(q_goal, float), planner_status=status)

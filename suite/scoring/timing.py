@@ -229,8 +229,8 @@ def _initial_grid(spline, knots_s: np.ndarray, gain: float) -> np.ndarray:
     return np.append(start + frac * np.repeat(ds, n), knots_s[-1])
 
 
-def _solve(spline_path, grid, v_lim, a_lim):
-    """One TOPP-RA solve: the path velocities sd at the gridpoints, or None."""
+def _solve(spline_path, grid, v_lim, a_lim, sd_start=0.0):
+    """One TOPP-RA solve: the path velocities sd at the gridpoints (from sd_start), or None."""
     vel = toppra.constraint.JointVelocityConstraint(np.column_stack([-v_lim, v_lim]))
     acc = toppra.constraint.JointAccelerationConstraint(
         np.column_stack([-a_lim, a_lim]),
@@ -239,7 +239,16 @@ def _solve(spline_path, grid, v_lim, a_lim):
     instance = toppra.algorithm.TOPPRA(
         [vel, acc], spline_path, gridpoints=grid, parametrizer="ParametrizeConstAccel", solver_wrapper="seidel"
     )
-    instance.compute_parameterization(0.0, 0.0)
+    if sd_start > 0:  # an uncontrollable start speed is an answer here (the join tries slower), not a warning
+        reach_log = logging.getLogger("toppra.algorithm.reachabilitybased.reachability_algorithm")
+        level = reach_log.level
+        reach_log.setLevel(logging.ERROR)
+        try:
+            instance.compute_parameterization(sd_start, 0.0)
+        finally:
+            reach_log.setLevel(level)
+    else:
+        instance.compute_parameterization(0.0, 0.0)
     data = instance.problem_data
     if data.return_code != toppra.algorithm.ParameterizationReturnCode.Ok or data.sd_vec is None:
         return None
@@ -249,8 +258,8 @@ def _solve(spline_path, grid, v_lim, a_lim):
     return np.maximum(sd, 0.0)
 
 
-def _failed(reason: str, start: float, dt_s: float, **extra) -> TimedTrajectory:
-    log.warning("timing failed: %s", reason)
+def _failed(reason: str, start: float, dt_s: float, quiet: bool = False, **extra) -> TimedTrajectory:
+    (log.debug if quiet else log.warning)("timing failed: %s", reason)
     empty = np.zeros((0, 7))
     fields = dict(velocity_ratio=math.nan, acceleration_ratio=math.nan, path_deviation_rad=math.nan, n_gridpoints=0)
     fields.update(extra)
@@ -265,6 +274,7 @@ def time_parameterize(
     *,
     robot: RobotModel | None = None,
     options: TimingOptions = TimingOptions(),
+    sd_start: float = 0.0,
 ) -> TimedTrajectory:
     """Time-optimal trajectory along a validated joint path within the robot's limits.
 
@@ -272,6 +282,9 @@ def time_parameterize(
         path: waypoints (N, 7) in rad, N >= 1, joined by straight joint-space segments.
         robot: whose velocity and acceleration limits apply (the project's iiwa 14 by default).
         options: densification, sampling and checking settings.
+        sd_start: the path speed at the start (rad/s of joint-space arc length; 0: from rest, as
+            every trial is timed). A moving start (the moving bin's joins) needs it inside TOPP-RA's
+            controllable set, else the status is "timing_failed".
 
     Returns:
         A TimedTrajectory; status "timing_failed" (never an exception) when TOPP-RA finds no
@@ -308,12 +321,12 @@ def time_parameterize(
     for round_ in range(options.max_refinements + 2):
         rounds += 1
         try:
-            sd = _solve(spline_path, grid, v_lim * v_scale, a_lim * a_scale)
+            sd = _solve(spline_path, grid, v_lim * v_scale, a_lim * a_scale, sd_start)
         except (toppra.exceptions.ToppraError, ValueError, ZeroDivisionError) as e:
             return _failed(f"TOPP-RA raised {type(e).__name__}: {e}", start, options.sample_dt_s)
-        if sd is None:
+        if sd is None:  # from a moving start, an expected answer (the join tries a slower one)
             return _failed("TOPP-RA found no feasible parameterization", start, options.sample_dt_s,
-                           n_gridpoints=len(grid))
+                           quiet=sd_start > 0, n_gridpoints=len(grid))
         v_ratio, a_ratio, s_checked = _check_intervals(spline, grid, sd, v_lim, a_lim, options.check_substeps)
         bad = (v_ratio > 1.0 + 0.8 * tol) | (a_ratio > 1.0 + 0.8 * tol)
         if not bad.any():

@@ -1,0 +1,127 @@
+"""The person beside the moving bin, as the loop watches them: swept checks, protective stops, near misses.
+
+A mixin of `suite.execution.moving_bin_episode.Episode` over the geometry and formulas of
+`suite.execution.person`:
+
+- `_person_check`: every new plan is checked against the person's positions predicted along its
+  timing (a swept check, `person_margin_m`), not only where they stand on arrival;
+- `_protective_stop`, `_hold_for_person`: speed-and-separation monitoring in the spirit of
+  ISO/TS 15066 during a transit or a return: at every estimate, the robot's distance to the
+  person (by the estimate) against the protective separation distance from the person's
+  estimated speed, the loop's reaction time, the gripper's speed and the arm's stopping time
+  and distance (from the stopping blend of the commanded state). Nearer: a protective stop;
+  the arm replans from rest once the person is clear by `resume_hysteresis_m`;
+- `_watch_person`: the true distance (measured joints, the person's true place) every 10 ms:
+  its minimum and the near misses (passes under `near_miss_m`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class PersonGuard:
+    """The loop's watch over the person (module docstring); mixed into the Episode."""
+
+    def _person_check(self, t: float, held: bool, t_start: float):
+        """The swept check of a new motion starting at t_start against the person's positions as
+        predicted at t; None with no margin to keep."""
+        from suite.execution.person import swept_person_check
+
+        if self.s.person_margin_m <= 0:
+            return None
+        est = self.estimator
+        held_can = self.transit_template.held if held else None
+        opening = 2 * self.spec.can.radius_m if held else self.open_w
+
+        def check(pieces) -> str | None:
+            t0 = t_start
+            for piece in pieces:
+                if piece.duration_s > 0:
+                    reason, _ = swept_person_check(
+                        self.spec.robot, piece, t0, lambda ta: est.predict(t, ta) + self.person_offset, self.s,
+                        self.spec, held_can=held_can, opening_m=opening, margin_m=self.s.person_margin_m)
+                    if reason is not None:
+                        return reason
+                t0 += piece.duration_s
+            return None
+
+        return check
+
+
+    def _separation(self, t: float, q: np.ndarray) -> float:
+        from suite.execution.person import robot_person_distance
+
+        carrying = self.carrying(t)
+        person = self.estimator.predict(t, t) + self.person_offset
+        return float(robot_person_distance(
+            self.spec.robot, q[None, :], person[None, :], self.s, self.spec,
+            held_can=self.transit_template.held if carrying else None,
+            opening_m=2 * self.spec.can.radius_m if carrying else self.open_w)[0])
+
+
+    def _protective_stop(self, t: float) -> bool:
+        """Speed and separation monitoring during a transit or a return: stop the arm when the
+        person (by the estimate) is nearer than the protective separation distance."""
+        from suite.execution.person import gripper_speed, ssm_verdict, stopping_motion
+
+        if self.mode not in ("transit", "returning") or t >= self.stream.duration_s:
+            return False
+        q, v, a = self.stream.state(t)
+        if np.max(np.abs(v)) < 1e-6:
+            return False
+        stop_t, stop_d = stopping_motion(self.spec.robot, q, v, a)
+        verdict, _ = ssm_verdict(self.ssm, separation_m=self._separation(t, q),
+                                 human_speed_m_s=float(np.linalg.norm(self.estimator.velocity(t))),
+                                 robot_speed_m_s=gripper_speed(self.spec.robot, q, v), stop_time_s=stop_t,
+                                 stop_distance_m=stop_d)
+        if verdict != "hold":
+            return False
+        self.ssm_holds += 1
+        self.resume_mode = self.mode
+        self._halt(t, "stop")
+        self.mode = "ssm_hold"
+        return True
+
+
+    def _hold_for_person(self, t: float) -> None:
+        """At rest after a protective stop: go on when the person is clear, else hold a period."""
+        from suite.execution.person import ssm_verdict
+
+        if self._over_time(t):
+            return
+        q = self.stream.q_end
+        verdict, _ = ssm_verdict(self.ssm, separation_m=self._separation(t, q),
+                                 human_speed_m_s=float(np.linalg.norm(self.estimator.velocity(t))),
+                                 robot_speed_m_s=0.0, stop_time_s=0.0, stop_distance_m=0.0, holding=True)
+        if verdict == "go":
+            self.mode = self.resume_mode
+            if self.mode == "transit":
+                self.busy_until = 0.0
+                self._arrived(t)  # at rest short of the bin: release if over it, else replan from rest
+            else:
+                self.mode = "released"
+                self._plan_return(t)
+            return
+        width = self.stream.at(t).width(t)[0]
+        self.stream.append_hold("wait", self.can_id, self.period, width_from_m=width, carrying=self.carrying(t))
+
+
+    def _watch_person(self, t: float) -> None:
+        """The true distance from the robot (measured joints) to the person: minimum and near misses."""
+        from suite.execution.person import robot_person_distance
+
+        sim = self.sim
+        q = sim.plant.GetPositions(sim.pc, sim.iiwa)
+        person = self.path.at(t)[0] + self.person_offset
+        carrying = self.carrying(t)
+        d = float(robot_person_distance(self.spec.robot, q[None, :], person[None, :], self.s, self.spec,
+                                        held_can=self.transit_template.held if carrying else None,
+                                        opening_m=2 * self.spec.can.radius_m if carrying else self.open_w)[0])
+        self.person_min = min(self.person_min, d)
+        near = d < self.s.near_miss_m
+        if near and not self._near:
+            self.near_misses += 1
+        self._near = near
+
+    # --- the loop ------------------------------------------------------------------------------

@@ -1,0 +1,185 @@
+"""The end of a can's transit in the moving-bin loop: the release, a given-up can put down, the return.
+
+A mixin of `suite.execution.moving_bin_episode.Episode` (its state: the command stream, the
+estimator, the can's lift and descend, the templates), one job per method:
+
+- `_release_window`, `_release`: with `release: moving`, the gripper accelerates to the bin's
+  estimated velocity over `track_ramp_s` and follows it while the fingers open
+  (`suite.execution.track.tracking_motion`, Drake's differential IK), then stops; the can falls
+  with the bin's velocity. The release happens only if the gripper so carried stays over the
+  opening by the prediction until the fingers have opened. With `release: rest` it opens standing
+  still when the bin is under it now and at the end of the opening;
+- `_give_up`, `_put_down`: a can not released in time is carried back over its place (planned
+  online by the same planner), lowered by the lift played backwards, let go, and the gripper
+  retreats by the descend played backwards: the can is back on the plate, the next can follows;
+- `_plan_return`: the return to above the plate (or to the next can's approach) from rest.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from suite.execution.moving_bin_records import CanEpisode, ReplanEvent
+from suite.execution.splice import stopping_blend
+
+#: Tries of a put-down plan before the episode stops with the can in the gripper.
+PUT_DOWN_TRIES = 3
+
+
+class Window:
+    """A time window [t0, t0 + duration] of a timed motion, as a motion of its own."""
+
+    def __init__(self, trajectory, t0_s: float, duration_s: float):
+        self._traj, self._t0, self.duration_s = trajectory, t0_s, duration_s
+        self.q = trajectory.sample(np.array([t0_s, t0_s + duration_s]))[0]
+        self.ok, self.status = True, "ok"
+
+    def sample(self, t_s):
+        return self._traj.sample(np.clip(t_s, 0.0, self.duration_s) + self._t0)
+
+
+class Reversed:
+    """A motion from rest to rest played backwards (a lift becomes a put-down)."""
+
+    def __init__(self, trajectory):
+        self._traj, self.duration_s = trajectory, trajectory.duration_s
+        self.q = np.asarray(trajectory.q)[::-1].copy()
+        self.ok, self.status = True, "ok"
+
+    def sample(self, t_s):
+        q, v, a = self._traj.sample(self.duration_s - np.clip(t_s, 0.0, self.duration_s))
+        return q, -v, a
+
+
+class ReleaseSteps:
+    """The release, the put-down and the return (module docstring); mixed into the Episode."""
+
+    def _halt(self, t: float, phase: str) -> None:
+        """Cut the command at t and bring the arm to rest (a stopping blend from its state)."""
+        st = self.stream
+        seg = st.at(t)
+        carrying, width = seg.carrying, seg.width(t)[0]
+        q, v, a = st.state(t)
+        st.cut(t, can_id=self.can_id, width_m=width, carrying=carrying)
+        blend = stopping_blend(q, v, a, v_lim=self.robot.velocity_limits_rad_s,
+                               a_lim=self.robot.acceleration_limits_rad_s2, q_lo=self.robot.lower_rad,
+                               q_hi=self.robot.upper_rad)
+        if blend is not None and blend.duration_s > 0:
+            st.append_motion(phase, self.can_id, blend, width_m=width, carrying=carrying)
+
+    # --- events --------------------------------------------------------------------------------
+
+
+    def _release_window(self, t: float, v: np.ndarray) -> bool:
+        """Will the gripper, carried at the bin's estimated velocity `v` from now (after the ramp),
+        stay over the opening by the prediction until the fingers have opened?"""
+        from suite.execution.track import ramp_lag_m
+
+        ramp, open_s = (self.s.track_ramp_s, self.job.config.open_s) if self.s.release == "moving" \
+            else (0.0, self.job.config.open_s)
+        p = self._gripper_xy()
+        half = self._half_opening()
+        lag = np.asarray(ramp_lag_m(v, ramp), float) if ramp > 0 else np.zeros(2)
+        for dt in np.linspace(ramp, ramp + open_s, 6):
+            gripper = p + v * dt - lag
+            if not np.all(np.abs(gripper - self.estimator.predict(t, t + dt)) <= half):
+                return False
+        return True
+
+
+    def _release(self, t: float, v: np.ndarray) -> bool:
+        """Open the gripper over the bin: following the bin at v (moving), or standing still."""
+        from suite.execution.track import tracking_motion
+
+        st, cfg = self.stream, self.job.config
+        truth = self.path.at(t)[0]
+        if self.s.release == "moving":
+            ramp = self.s.track_ramp_s
+            track = tracking_motion(self.spec.robot, st.q_end, v, ramp_s=ramp, duration_s=ramp + cfg.open_s)
+            if track is None:
+                self.events.append(ReplanEvent(t, self.can_id, "release", None, 0.0, None, "track failed",
+                                               "no tracking motion at the bin's velocity", "track"))
+                return False
+            st.append_motion("track", self.can_id, Window(track, 0.0, ramp), width_m=0.0, carrying=True)
+            st.append_hold("open", self.can_id, 0.0, width_from_m=0.0, carrying=False)
+            st.segments.pop(), st._starts.pop()  # noqa: SLF001 (no piece: the opening moves)
+            st.append_motion("open", self.can_id, Window(track, ramp, cfg.open_s), width_m=0.0, carrying=False)
+            last = st.segments[-1]
+            st.segments[-1] = dataclasses.replace(last, width_from_m=0.0, width_to_m=self.open_w)
+            self._halt(st.duration_s, "stop")
+            release_t, speed = t + ramp, float(np.linalg.norm(v))
+        else:
+            st.append_hold("open", self.can_id, cfg.open_s, width_from_m=0.0, width_to_m=self.open_w, carrying=False)
+            release_t, speed = t, 0.0
+        self.cans.append(CanEpisode(self.can_id, True, release_t - self.grasp_t,
+                                    float(np.linalg.norm(self._gripper_xy() - truth)), release_speed_m_s=speed))
+        self.removed.append(self.can_id)
+        self.mode = "released"
+        self.released_t = st.duration_s
+        return True
+
+
+    def _give_up(self, t: float, why: str) -> None:
+        """Give the can up: bring the arm to rest, then carry the can back to its place."""
+        self.cans.append(CanEpisode(self.can_id, False, None, None, gave_up=why))
+        self._halt(t, "stop")
+        self.mode = "put_down"
+        self.gave_up_t = t
+
+
+    def _put_down(self, t: float) -> None:
+        """Carry the given-up can back over its place, lower it (the lift reversed), open, and
+        retreat (the descend reversed)."""
+        st, c = self.stream, self.can_id
+        q = st.q_end
+        q_lift = np.asarray(self.lift.q[-1], float)
+        res = None
+        if np.max(np.abs(q - q_lift)) > 1e-3:
+            z = np.zeros(7)
+            res = self._plan(template=self.transit_template.with_(X_WG_goal=self.X_plate), t=t,
+                             bin_xy=self.estimator.predict(t, t + 1.0), q_s=q, v_s=z, a_s=z, deadline_bound=False,
+                             start_s=t, q_goal=q_lift, via=[self.X_middle])
+            self._event(t, "put_down", res, "planned" if res.ok else "failed")
+            if not res.ok:
+                self.put_down_tries += 1
+                if self.put_down_tries >= PUT_DOWN_TRIES:
+                    self._stop(f"can {c}: given up, and no plan to put it down ({res.reason}); stopped safely "
+                               "with the can in the gripper", carrying=True)
+                    return
+                st.append_hold("wait", c, max(res.latency_s, self.period), width_from_m=0.0, carrying=True)
+                return
+            st.append_hold("wait", c, res.latency_s, width_from_m=0.0, carrying=True)
+            st.append_motion("carry_back", c, res.trajectory, width_m=0.0, carrying=True)
+        st.append_motion("put_down", c, Reversed(self.lift), width_m=0.0, carrying=True)
+        st.append_hold("open", c, self.job.config.open_s, width_from_m=0.0, width_to_m=self.open_w, carrying=False)
+        st.append_motion("retreat", c, Reversed(self.descend), width_m=self.open_w, carrying=False)
+        last = self.cans[-1]
+        self.cans[-1] = dataclasses.replace(last, put_down=True)
+        self.mode = "put_down_done"
+        self.released_t = st.duration_s
+
+
+    def _plan_return(self, t: float) -> None:
+        q = self.stream.q_end
+        z = np.zeros(7)
+        goal = np.asarray(self.queue[0][1][0].q[0], float) if self.queue else self.q_home
+        back = self.mode == "put_down_done"
+        template = self.back_template if back else self.return_template
+        res = self._plan(template=template, t=t, bin_xy=self.estimator.predict(t, t + 1.0), q_s=q, v_s=z, a_s=z,
+                         deadline_bound=False, start_s=t, q_goal=goal, via=[] if back else [self.X_middle],
+                         held=False)
+        self._event(t, "return", res, "planned" if res.ok else "failed")
+        st = self.stream
+        if res.ok:
+            st.append_hold("wait", self.can_id, res.latency_s, width_from_m=self.open_w, carrying=False)
+            st.append_motion("return", self.can_id, res.trajectory, width_m=self.open_w, carrying=False)
+            self.mode = "returning"
+        elif t - self.released_t > self.s.max_wait_s:
+            self._stop(f"can {self.can_id}: no return plan ({res.reason})", carrying=False)
+        else:
+            st.append_hold("wait", self.can_id, max(res.latency_s, self.period), width_from_m=self.open_w,
+                           carrying=False)
+
+    # --- the person --------------------------------------------------------------------------
