@@ -47,15 +47,18 @@ person) beside them. Jump: the largest jump of the command at a splice (position
 rad/s). Grasp-release: median time from the closed grasp to the release.
 """
 
+#: The fewest paired episodes over which a difference may be called established.
+MIN_PAIRED = 10
+
 PAIRED_CAPTION = (
     "Paired differences between planners. The unit is an episode: one scene, one seeded bin path, one "
     "speed (and latency and release mode), which every planner meets. For each episode both planners ran "
     "(status ok, at least one can attempted each), d = A's cans in the bin per can attempted minus B's; the "
     "table gives the episodes paired, the mean of d in percentage points and its 95% interval from a "
     "percentile bootstrap over episodes (10,000 resamples, seed 0); established: the interval excludes 0; "
-    "A ahead / B ahead: the episodes where each put more in the bin. \"all\" pools every speed. With few "
-    "episodes the bootstrap interval is too narrow (over 2 episodes it takes at most 3 values): read an "
-    "'established' over few episodes as a hint.")
+    "A ahead / B ahead: the episodes where each put more in the bin. \"all\" pools every speed. Over few "
+    "episodes a percentile bootstrap interval is too narrow (over 2 it takes at most 3 values), so a difference "
+    f"is called established only over at least {MIN_PAIRED} paired episodes.")
 
 #: The failure stages in the order of a replan, and their short names in a table cell.
 STAGES = ("goal_ik", "join", "planner", "validator", "person", "timing", "budget")
@@ -344,7 +347,8 @@ class PairedDifference:
 
     @property
     def established(self) -> bool | None:
-        if self.ci_pp is None:
+        """The interval excludes 0, over at least MIN_PAIRED episodes (None: too few to say)."""
+        if self.ci_pp is None or self.n < MIN_PAIRED:
             return None
         return self.ci_pp[0] > 0 or self.ci_pp[1] < 0
 
@@ -429,7 +433,8 @@ def paired_rows(records: Sequence[dict[str, Any]], planners: Sequence[str] | Non
         if d.ci_pp is None:
             row += ["-", "-", "-"]
         else:
-            row += [_pp(d.mean_pp), f"[{_pp(d.ci_pp[0])}, {_pp(d.ci_pp[1])}]", "yes" if d.established else "no"]
+            said = {True: "yes", False: "no", None: f"too few (< {MIN_PAIRED})"}[d.established]
+            row += [_pp(d.mean_pp), f"[{_pp(d.ci_pp[0])}, {_pp(d.ci_pp[1])}]", said]
         rows.append(row)
     return headers, rows
 

@@ -222,7 +222,10 @@ def _paired_records():
     return out
 
 
-def test_paired_differences_pair_episodes_by_their_bin_path():
+def test_paired_differences_pair_episodes_by_their_bin_path(monkeypatch):
+    import suite.report.summary_moving_bin as smb
+
+    monkeypatch.setattr(smb, "MIN_PAIRED", 2)  # the arithmetic over few episodes (the rule: its own test)
     records = _paired_records()
     diffs = paired_differences(records, planners=("ik", "rrt"))
     at_02 = next(d for d in diffs if d.speed_m_s == 0.2)
@@ -249,7 +252,20 @@ def test_paired_differences_pair_episodes_by_their_bin_path():
     assert cells["all"]["episodes paired"] == 6
 
 
-def test_a_difference_whose_interval_holds_zero_is_not_established():
+def test_a_difference_over_too_few_episodes_is_never_established():
+    import suite.report.summary_moving_bin as smb
+
+    records = _paired_records()
+    at_02 = next(d for d in paired_differences(records, planners=("ik", "rrt")) if d.speed_m_s == 0.2)
+    assert at_02.n == 5 < smb.MIN_PAIRED and at_02.ci_pp[0] > 0 and at_02.established is None
+    cells = {r[1]: r for r in paired_rows(records, ("ik", "rrt"))[1]}
+    assert cells["0.2"][-1].startswith("too few")
+
+
+def test_a_difference_whose_interval_holds_zero_is_not_established(monkeypatch):
+    import suite.report.summary_moving_bin as smb
+
+    monkeypatch.setattr(smb, "MIN_PAIRED", 2)
     rates = [(5, 5, 0, 5), (0, 5, 5, 5), (4, 4, 3, 4), (3, 4, 4, 4), (2, 2, 2, 2)]  # d = +1, -1, +.25, -.25, 0
     records = []
     for seed, (ka, na, kb, nb) in enumerate(rates):
