@@ -67,7 +67,11 @@ class MovingBinScenario:
             replan while the arrival is `drift_horizon_s` or more away; closer to it the
             tolerance shrinks linearly with the time to go, down to `drift_tolerance_min_m` on
             arrival (far out, a prediction is coarse and a correction cheap; near the release it
-            must be fine).
+            must be finer, though well inside the opening's capture region: ±11 cm for the
+            spec's bin and can, so that noise alone does not trigger a replan at every estimate).
+        commit_s: no drift replan whose splice falls in the transit's last `commit_s`: the arm
+            commits to its arrival (the release tracks the bin from there); without it a loop
+            near arrival can replace its plan at every estimate and never arrive.
         replan_deadline_s: in "measured" latency mode, a replan's wall-time deadline: its plan
             is spliced in this long after the replan starts, from the state the current plan
             commands then; a plan ready later is dropped (the current plan goes on).
@@ -113,9 +117,10 @@ class MovingBinScenario:
     estimate_rate_hz: Pos = 10.0
     estimate_noise_m: NonNeg = 0.003
     velocity_window: PosInt = 5
-    drift_tolerance_m: Pos = 0.04
-    drift_tolerance_min_m: Pos = 0.01
+    drift_tolerance_m: Pos = 0.08
+    drift_tolerance_min_m: Pos = 0.03
     drift_horizon_s: Pos = 1.0
+    commit_s: NonNeg = 0.2
     replan_deadline_s: Pos = 0.3
     latency_mode: Literal["measured", "modelled"] = "measured"
     modelled_latency_s: dict[str, Pos] | None = None

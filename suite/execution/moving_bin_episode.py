@@ -213,7 +213,7 @@ class Episode(ReleaseSteps, PersonGuard):
             return
         self.can_id, (approach, descend, lift) = self.queue.pop(0)
         self.attempted.append(self.can_id)
-        self.lift, self.descend = lift, descend
+        self.approach, self.descend, self.lift = approach, descend, lift
         self._templates(self.can_id)
         st, c = self.stream, self.can_id
         st.append_motion("approach", c, approach, width_m=self.open_w, carrying=False)
@@ -294,6 +294,8 @@ class Episode(ReleaseSteps, PersonGuard):
             return
         E = self._expected_latency()
         t_s = t + E
+        if t_s > self.arrival_t - self.s.commit_s:  # committed to this arrival
+            return
         q_s, v_s, a_s = self.stream.state(t_s)
         traj, t0 = self.transit
         warm = traj.q[traj.t_s >= t_s - t0] if t_s - t0 < traj.duration_s else None
@@ -331,8 +333,9 @@ class Episode(ReleaseSteps, PersonGuard):
         self._adopt(res, start, lead)
         self.busy_until = t_s
 
-    def _arrived(self, t: float) -> None:
-        """At rest at the end of the transit: release over the opening, or hold and replan."""
+    def _arrived(self, t: float, trigger: str = "arrival") -> None:
+        """At rest at the end of the transit (or after a protective stop, `trigger` "resume"):
+        release over the opening, or hold and replan."""
         st = self.stream
         if t < self.busy_until:  # a replan that missed its deadline is still running
             st.append_hold("wait", self.can_id, self.busy_until - t, width_from_m=0.0, carrying=True)
@@ -357,7 +360,7 @@ class Episode(ReleaseSteps, PersonGuard):
         z = np.zeros(7)
         res = self._plan(template=self.transit_template, t=t, bin_xy=predicted, q_s=q, v_s=z, a_s=z,
                          deadline_bound=True, start_s=t_s, drop_offset=lead)
-        self._settle(t, t_s, res, "arrival", drift, lead)
+        self._settle(t, t_s, res, trigger, drift, lead)
         if self.stream.duration_s <= t + 1e-9:  # nothing spliced: hold and look again
             st.append_hold("wait", self.can_id, max(res.latency_s, self.period), width_from_m=0.0, carrying=True)
 

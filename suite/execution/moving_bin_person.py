@@ -98,7 +98,7 @@ class PersonGuard:
             self.mode = self.resume_mode
             if self.mode == "transit":
                 self.busy_until = 0.0
-                self._arrived(t)  # at rest short of the bin: release if over it, else replan from rest
+                self._arrived(t, "resume")  # at rest short of the bin: release if over it, else replan
             else:
                 self.mode = "released"
                 self._plan_return(t)

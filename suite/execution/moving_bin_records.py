@@ -254,7 +254,7 @@ def episode_record(ep, monitor, fates, wall: float) -> MovingBinRecord:
     events and cans, the physics monitor, the cans' fates and the wall time of the simulation."""
     from suite.execution.replan import STAGES
 
-    deadline_bound = [e for e in ep.events if e.trigger in ("drift", "arrival")]
+    deadline_bound = [e for e in ep.events if e.trigger in ("drift", "arrival", "resume")]
     lat = [e.latency_s for e in deadline_bound]
     plans = [e.latency_s for e in ep.events if e.trigger in ("lift", "return", "put_down")]
     spliced = [e for e in deadline_bound if e.outcome == "spliced"]

@@ -11,8 +11,14 @@ estimator, the can's lift and descend, the templates), one job per method:
   still when the bin is under it now and at the end of the opening;
 - `_give_up`, `_put_down`: a can not released in time is carried back over its place (planned
   online by the same planner), lowered by the lift played backwards, let go, and the gripper
-  retreats by the descend played backwards: the can is back on the plate, the next can follows;
+  retreats by the descend and the approach played backwards (the way it came, in the same world:
+  the start of a return planned from the pre-grasp would sit within the margins of the can it just
+  let go): the can is back on the plate, the next can follows;
 - `_plan_return`: the return to above the plate (or to the next can's approach) from rest.
+
+A put-down's and a return's world has the bin and the person where they are estimated now (the
+person's motion along the plan is the swept check's): the first loop placed them where they would
+be a second later, which could put the person on the arm's start.
 """
 
 from __future__ import annotations
@@ -103,13 +109,15 @@ class ReleaseSteps:
                                                "no tracking motion at the bin's velocity", "track"))
                 return False
             st.append_motion("track", self.can_id, Window(track, 0.0, ramp), width_m=0.0, carrying=True)
-            st.append_hold("open", self.can_id, 0.0, width_from_m=0.0, carrying=False)
-            st.segments.pop(), st._starts.pop()  # noqa: SLF001 (no piece: the opening moves)
             st.append_motion("open", self.can_id, Window(track, ramp, cfg.open_s), width_m=0.0, carrying=False)
-            last = st.segments[-1]
+            last = st.segments[-1]  # the fingers open while the arm follows the bin
             st.segments[-1] = dataclasses.replace(last, width_from_m=0.0, width_to_m=self.open_w)
-            self._halt(st.duration_s, "stop")
             release_t, speed = t + ramp, float(np.linalg.norm(v))
+            self.cans.append(CanEpisode(self.can_id, True, release_t - self.grasp_t,
+                                        float(np.linalg.norm(self._gripper_xy() - truth)), release_speed_m_s=speed))
+            self.removed.append(self.can_id)
+            self._return_on_the_move(t, track.sample(track.duration_s))
+            return True
         else:
             st.append_hold("open", self.can_id, cfg.open_s, width_from_m=0.0, width_to_m=self.open_w, carrying=False)
             release_t, speed = t, 0.0
@@ -120,6 +128,33 @@ class ReleaseSteps:
         self.released_t = st.duration_s
         return True
 
+
+    def _return_on_the_move(self, t: float, end) -> None:
+        """Plan the return now, from the state in which the opening ends (the arm still moving with
+        the bin), and join it there: the arm moves away instead of stopping where the person walks
+        on into it. A plan not ready by then, or none, leaves a stop after the opening and the
+        return planned from rest."""
+        st = self.stream
+        t_end = st.duration_s
+        q_e, v_e, a_e = (np.asarray(x, float) for x in end)
+        res = self._plan(template=self.return_template, t=t, bin_xy=self.estimator.predict(t, t_end), q_s=q_e,
+                         v_s=v_e, a_s=a_e, deadline_bound=False, start_s=t_end, q_goal=self._return_goal(),
+                         via=[self.X_middle], held=False)
+        if res.ok and res.latency_s <= t_end - t:
+            self._event(t, "return", res, "spliced", speed=float(np.max(np.abs(v_e))), expected=t_end - t)
+            if res.blend.duration_s > 0:
+                st.append_motion("return", self.can_id, res.blend, width_m=self.open_w, carrying=False)
+            st.append_motion("return", self.can_id, res.trajectory, width_m=self.open_w, carrying=False)
+            self.mode = "returning"
+        else:
+            self._event(t, "return", res, "missed" if res.ok else "failed", expected=t_end - t)
+            self._halt(t_end, "stop")
+            self.mode = "released"
+        self.released_t = st.duration_s
+
+    def _return_goal(self) -> np.ndarray:
+        """Where the return goes: the next can's approach start, or home after the last can."""
+        return np.asarray(self.queue[0][1][0].q[0], float) if self.queue else self.q_home
 
     def _give_up(self, t: float, why: str) -> None:
         """Give the can up: bring the arm to rest, then carry the can back to its place."""
@@ -139,7 +174,7 @@ class ReleaseSteps:
         if np.max(np.abs(q - q_lift)) > 1e-3:
             z = np.zeros(7)
             res = self._plan(template=self.transit_template.with_(X_WG_goal=self.X_plate), t=t,
-                             bin_xy=self.estimator.predict(t, t + 1.0), q_s=q, v_s=z, a_s=z, deadline_bound=False,
+                             bin_xy=self.estimator.predict(t, t), q_s=q, v_s=z, a_s=z, deadline_bound=False,
                              start_s=t, q_goal=q_lift, via=[self.X_middle])
             self._event(t, "put_down", res, "planned" if res.ok else "failed")
             if not res.ok:
@@ -155,6 +190,7 @@ class ReleaseSteps:
         st.append_motion("put_down", c, Reversed(self.lift), width_m=0.0, carrying=True)
         st.append_hold("open", c, self.job.config.open_s, width_from_m=0.0, width_to_m=self.open_w, carrying=False)
         st.append_motion("retreat", c, Reversed(self.descend), width_m=self.open_w, carrying=False)
+        st.append_motion("retreat", c, Reversed(self.approach), width_m=self.open_w, carrying=False)
         last = self.cans[-1]
         self.cans[-1] = dataclasses.replace(last, put_down=True)
         self.mode = "put_down_done"
@@ -164,10 +200,13 @@ class ReleaseSteps:
     def _plan_return(self, t: float) -> None:
         q = self.stream.q_end
         z = np.zeros(7)
-        goal = np.asarray(self.queue[0][1][0].q[0], float) if self.queue else self.q_home
+        goal = self._return_goal()
         back = self.mode == "put_down_done"
+        if np.max(np.abs(q - goal)) < 1e-6:  # back where the next approach starts (a put-down's retreat)
+            self.mode = "returning"
+            return
         template = self.back_template if back else self.return_template
-        res = self._plan(template=template, t=t, bin_xy=self.estimator.predict(t, t + 1.0), q_s=q, v_s=z, a_s=z,
+        res = self._plan(template=template, t=t, bin_xy=self.estimator.predict(t, t), q_s=q, v_s=z, a_s=z,
                          deadline_bound=False, start_s=t, q_goal=goal, via=[] if back else [self.X_middle],
                          held=False)
         self._event(t, "return", res, "planned" if res.ok else "failed")

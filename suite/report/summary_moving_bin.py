@@ -81,7 +81,7 @@ def _release_mode(r: dict[str, Any]) -> str:
 def _deadline_bound(e: dict[str, Any]) -> bool:
     """A replan under a deadline: one with a deadline, or a drift or arrival replan (in modelled
     mode these carry none); not the first transit, a return or a put-down, which the arm waits for."""
-    return e.get("deadline_s") is not None or e.get("trigger") in ("drift", "arrival")
+    return e.get("deadline_s") is not None or e.get("trigger") in ("drift", "arrival", "resume")
 
 
 def _total(rs: Sequence[dict[str, Any]], key: str) -> int | None:
