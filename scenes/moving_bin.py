@@ -78,7 +78,7 @@ class MovingBinScenario:
         latency_mode: "measured": every plan's latency is its wall time on this machine (the
             planner's budget is what is left of the deadline); "modelled": every plan's latency
             is the planner's declared constant (`modelled_latency_s`, else the loop's
-            calibrated table `suite.execution.moving_bin.MODELLED_LATENCY_S`), the splice is that
+            calibrated table `suite.execution.moving_bin_records.MODELLED_LATENCY_S`), the splice is that
             long after the replan starts, and planners finish by their own criteria and seeds
             (their budget is the run's time limit, a cap), so a run gives the same records on
             any machine.
@@ -94,6 +94,11 @@ class MovingBinScenario:
             predicted bin by the ramp's lag. "rest": the arm releases standing still, when the
             bin is under it now and at the end of the opening.
         track_ramp_s: the release's acceleration to the bin's velocity.
+        aim: "predicted": the transit aims at where the bin is predicted on arrival and is
+            replanned as the prediction drifts; "centre": a control without replanning: the arm
+            carries the can over the centre of the bin's region and waits there for the bin to come
+            under it (the opening covers the region's centre most of the time when the region is
+            small), then releases as `release` says.
         person_margin_m: every new plan keeps this far from the person along its timing (a swept
             check against the person's predicted positions).
         ssm: speed-and-separation monitoring: the arm makes a protective stop when the person
@@ -128,6 +133,7 @@ class MovingBinScenario:
     can_time_limit_s: Pos = 20.0
     release: Literal["moving", "rest"] = "moving"
     track_ramp_s: Pos = 0.15
+    aim: Literal["predicted", "centre"] = "predicted"
     person_margin_m: NonNeg = 0.05
     ssm: bool = True
     near_miss_m: Pos = 0.05

@@ -36,7 +36,7 @@ import numpy as np
 
 from planners.base import PlanningProblem, TaskWaypoint
 from scenes.grasp_rule import truth_grasp, waypoint_pose
-from scenes.moving_bin import bin_path, person_offset_m
+from scenes.moving_bin import bin_path, person_offset_m, region
 from scenes.scene import HeldCan
 from suite.execution.bin_estimate import BinEstimator
 from suite.execution.commands import CommandStream
@@ -87,7 +87,7 @@ class Episode(ReleaseSteps, PersonGuard):
         self.modelled = scenario.latency_mode == "modelled"
         self.latency_model = modelled_latency(scenario, job.planner)
         self.person_offset = person_offset_m(scenario, spec)
-        self.ssm = SsmSettings()
+        self.ssm = SsmSettings.for_scenario(scenario)
         X_plate, X_middle = (waypoint_pose(p) for p in (spec.waypoints.above_plate_m, spec.waypoints.middle_m))
         self.X_middle = X_middle
         self.X_plate = X_plate
@@ -114,6 +114,7 @@ class Episode(ReleaseSteps, PersonGuard):
         self.plan_wall = 0.0
         self.last_transit_s = TRANSIT_GUESS_S
         self.ssm_holds = 0
+        self.pending_offset = None  # (index in cans, time) of a release whose offset is measured then
         self.person_min = np.inf
         self.near_misses = 0
         self._near = False
@@ -248,6 +249,8 @@ class Episode(ReleaseSteps, PersonGuard):
         q = self.stream.q_end
         z = np.zeros(7)
         lead = self._lead(t)
+        if self.s.aim == "centre":  # the control: over the region's centre, whatever the bin does
+            bin_xy, lead = np.mean(region(self.s, self.spec), axis=0), np.zeros(2)
         res = self._plan(template=self.transit_template, t=t, bin_xy=bin_xy, q_s=q, v_s=z, a_s=z,
                          deadline_bound=False, start_s=max(self.lift_end_t, t), via=self._via(q, bin_xy),
                          drop_offset=lead)
@@ -285,7 +288,7 @@ class Episode(ReleaseSteps, PersonGuard):
             return
         if self.s.ssm and self._protective_stop(t):
             return
-        if self.mode != "transit" or t >= self.arrival_t or t < self.busy_until:
+        if self.mode != "transit" or t >= self.arrival_t or t < self.busy_until or self.s.aim == "centre":
             return
         lead = self._lead(t)
         predicted = self.estimator.predict(t, self.arrival_t)
@@ -342,19 +345,22 @@ class Episode(ReleaseSteps, PersonGuard):
             return
         if self._over_time(t):
             return
-        if self.arrived_t is None:
+        if self.arrived_t is None and trigger == "arrival":
             self.arrived_t = t  # the wait runs from the first arrival, whatever is replanned after it
         moving = self.s.release == "moving"
         v = self.estimator.velocity(t) if moving else np.zeros(2)
         if self._release_window(t, v) and self._release(t, v):
             return
-        if t - self.arrived_t > self.s.max_wait_s:
+        if self.arrived_t is not None and t - self.arrived_t > self.s.max_wait_s:
             self._give_up(t, f"not over the bin's opening after {self.s.max_wait_s:g} s")
+            return
+        if self.s.aim == "centre":  # the control waits where it is for the bin to come under it
+            st.append_hold("wait", self.can_id, self.period, width_from_m=0.0, carrying=True)
             return
         E = self._expected_latency()
         t_s = t + E
         lead = self._lead(t)
-        predicted = self.estimator.predict(t, t_s + 1.0)
+        predicted = self.estimator.predict(t, t_s + self.last_transit_s)
         drift = float(np.linalg.norm(predicted + lead - self.target_xy))
         q = st.q_end
         z = np.zeros(7)
@@ -393,8 +399,10 @@ class Episode(ReleaseSteps, PersonGuard):
                 sim.simulator.AdvanceTo(t)
                 full = steps % every == 0 or t >= st.duration_s
                 monitor.check(sim.root, full=full)
-                if full and self.mode in ("transit", "returning", "released", "ssm_hold", "put_down", "arrival"):
+                if full:
                     self._watch_person(t)
+                if self.pending_offset is not None:
+                    self._measure_release(t)
                 if self.mode == "lift" and self.can_id not in lifted and t >= self.lift_start_t:
                     lifted.add(self.can_id)
                     self.on_lift_start(t)

@@ -6,10 +6,13 @@ A mixin of `suite.execution.moving_bin_episode.Episode` over the geometry and fo
 - `_person_check`: every new plan is checked against the person's positions predicted along its
   timing (a swept check, `person_margin_m`), not only where they stand on arrival;
 - `_protective_stop`, `_hold_for_person`: speed-and-separation monitoring in the spirit of
-  ISO/TS 15066 during a transit or a return: at every estimate, the robot's distance to the
-  person (by the estimate) against the protective separation distance from the person's
-  estimated speed, the loop's reaction time, the gripper's speed and the arm's stopping time
-  and distance (from the stopping blend of the commanded state). Nearer: a protective stop;
+  ISO/TS 15066 during a transit or a return (not a put-down's carry back, which the monitor
+  would cut mid-sequence: it leads away from the person): at every estimate, the robot's
+  distance to the person (by the estimate) against the protective separation distance from the
+  person's top speed (the scenario's cruise speed), the loop's reaction time (estimate latency
+  plus period), the fastest point of the arm and its stopping time and distance (from the
+  stopping blend of the commanded state, not measured in the physics), with the position
+  uncertainty of `SsmSettings.for_scenario`. Nearer: a protective stop;
   the arm replans from rest once the person is clear by `resume_hysteresis_m`;
 - `_watch_person`: the true distance (measured joints, the person's true place) every 10 ms:
   its minimum and the near misses (passes under `near_miss_m`).
@@ -63,7 +66,7 @@ class PersonGuard:
     def _protective_stop(self, t: float) -> bool:
         """Speed and separation monitoring during a transit or a return: stop the arm when the
         person (by the estimate) is nearer than the protective separation distance."""
-        from suite.execution.person import gripper_speed, ssm_verdict, stopping_motion
+        from suite.execution.person import robot_speed, ssm_verdict, stopping_motion
 
         if self.mode not in ("transit", "returning") or t >= self.stream.duration_s:
             return False
@@ -72,8 +75,8 @@ class PersonGuard:
             return False
         stop_t, stop_d = stopping_motion(self.spec.robot, q, v, a)
         verdict, _ = ssm_verdict(self.ssm, separation_m=self._separation(t, q),
-                                 human_speed_m_s=float(np.linalg.norm(self.estimator.velocity(t))),
-                                 robot_speed_m_s=gripper_speed(self.spec.robot, q, v), stop_time_s=stop_t,
+                                 human_speed_m_s=self.s.speed_m_s,
+                                 robot_speed_m_s=robot_speed(self.spec.robot, q, v), stop_time_s=stop_t,
                                  stop_distance_m=stop_d)
         if verdict != "hold":
             return False
@@ -92,7 +95,7 @@ class PersonGuard:
             return
         q = self.stream.q_end
         verdict, _ = ssm_verdict(self.ssm, separation_m=self._separation(t, q),
-                                 human_speed_m_s=float(np.linalg.norm(self.estimator.velocity(t))),
+                                 human_speed_m_s=self.s.speed_m_s,
                                  robot_speed_m_s=0.0, stop_time_s=0.0, stop_distance_m=0.0, holding=True)
         if verdict == "go":
             self.mode = self.resume_mode

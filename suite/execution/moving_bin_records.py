@@ -23,6 +23,9 @@ from suite.execution.config import ExecutionConfig
 #: format 1, read with their defaults).
 FORMAT_VERSION = 2
 
+#: A release counts as on the move above this gripper speed (an estimate of a still bin is noise).
+MOVING_RELEASE_M_S = 0.02
+
 #: Kept replan events per record.
 MAX_EVENTS = 400
 
@@ -108,7 +111,7 @@ class CanEpisode:
     can_id: int
     released: bool
     grasp_to_release_s: float | None
-    release_offset_m: float | None  # the gripper's true distance (xy) from the bin centre at release
+    release_offset_m: float | None  # the gripper's true distance (xy) from the bin centre when the opening starts
     gave_up: str = ""
     release_speed_m_s: float | None = None  # the gripper's speed at release (0 from rest)
     put_down: bool = False  # given up and put back on the plate

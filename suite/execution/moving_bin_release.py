@@ -97,37 +97,56 @@ class ReleaseSteps:
 
     def _release(self, t: float, v: np.ndarray) -> bool:
         """Open the gripper over the bin: following the bin at v (moving), or standing still."""
-        from suite.execution.track import tracking_motion
-
         st, cfg = self.stream, self.job.config
-        truth = self.path.at(t)[0]
         if self.s.release == "moving":
-            ramp = self.s.track_ramp_s
-            track = tracking_motion(self.spec.robot, st.q_end, v, ramp_s=ramp, duration_s=ramp + cfg.open_s)
+            track, ramp = self._tracking(st.q_end, v, cfg.open_s)
             if track is None:
                 self.events.append(ReplanEvent(t, self.can_id, "release", None, 0.0, None, "track failed",
-                                               "no tracking motion at the bin's velocity", "track"))
+                                               "no tracking motion at the bin's velocity within the limits", "track"))
                 return False
             st.append_motion("track", self.can_id, Window(track, 0.0, ramp), width_m=0.0, carrying=True)
             st.append_motion("open", self.can_id, Window(track, ramp, cfg.open_s), width_m=0.0, carrying=False)
             last = st.segments[-1]  # the fingers open while the arm follows the bin
             st.segments[-1] = dataclasses.replace(last, width_from_m=0.0, width_to_m=self.open_w)
-            release_t, speed = t + ramp, float(np.linalg.norm(v))
-            self.cans.append(CanEpisode(self.can_id, True, release_t - self.grasp_t,
-                                        float(np.linalg.norm(self._gripper_xy() - truth)), release_speed_m_s=speed))
+            # its offset from the bin is measured when the opening starts, after the ramp
+            self.cans.append(CanEpisode(self.can_id, True, t + ramp - self.grasp_t, None,
+                                        release_speed_m_s=float(np.linalg.norm(v))))
+            self.pending_offset = (len(self.cans) - 1, t + ramp)
             self.removed.append(self.can_id)
             self._return_on_the_move(t, track.sample(track.duration_s))
             return True
-        else:
-            st.append_hold("open", self.can_id, cfg.open_s, width_from_m=0.0, width_to_m=self.open_w, carrying=False)
-            release_t, speed = t, 0.0
-        self.cans.append(CanEpisode(self.can_id, True, release_t - self.grasp_t,
-                                    float(np.linalg.norm(self._gripper_xy() - truth)), release_speed_m_s=speed))
+        st.append_hold("open", self.can_id, cfg.open_s, width_from_m=0.0, width_to_m=self.open_w, carrying=False)
+        self.cans.append(CanEpisode(self.can_id, True, t - self.grasp_t,
+                                    float(np.linalg.norm(self._gripper_xy() - self.path.at(t)[0])),
+                                    release_speed_m_s=0.0))
         self.removed.append(self.can_id)
         self.mode = "released"
         self.released_t = st.duration_s
         return True
 
+    def _tracking(self, q0: np.ndarray, v: np.ndarray, open_s: float):
+        """The release's tracking motion at the bin's velocity v, within the joint acceleration
+        limits (differential IK bounds positions and velocities only): the ramp as set, else two
+        and three times as long. (None, 0) if none is."""
+        from suite.execution.track import tracking_motion
+
+        a_lim = self.robot.acceleration_limits_rad_s2
+        for k in (1.0, 2.0, 3.0):
+            ramp = k * self.s.track_ramp_s
+            track = tracking_motion(self.spec.robot, q0, v, ramp_s=ramp, duration_s=ramp + open_s)
+            if track is not None:
+                a = track.sample(np.linspace(0.0, track.duration_s, 200))[2]
+                if np.all(np.abs(a) <= a_lim):
+                    return track, ramp
+        return None, 0.0
+
+    def _measure_release(self, t: float) -> None:
+        """The gripper's true distance (xy) from the bin centre when the opening starts."""
+        i, at = self.pending_offset
+        if t + 1e-9 >= at:
+            offset = float(np.linalg.norm(self._gripper_xy() - self.path.at(t)[0]))
+            self.cans[i] = dataclasses.replace(self.cans[i], release_offset_m=offset)
+            self.pending_offset = None
 
     def _return_on_the_move(self, t: float, end) -> None:
         """Plan the return now, from the state in which the opening ends (the arm still moving with

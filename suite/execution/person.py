@@ -134,8 +134,10 @@ class SsmSettings:
         intrusion_m: C, the reach of a body part past the sensed boundary: 0, the person is a
             solid cylinder whose radius already holds the hands.
         uncertainty_m: Z_d + Z_r, the person's and the robot's position uncertainty: 3 mm estimate
-            noise plus the constant-velocity prediction's error, rounded up to 1 cm.
-        human_speed_m_s: v_h; None: the estimated speed of the bin (the person walks with it).
+            noise rounded up to 1 cm for a still person; the loop adds how far the person walks
+            in one estimate latency and period (`for_scenario`).
+        human_speed_m_s: v_h; None: the speed the caller gives (the loop: the scenario's
+            cruise speed, the person's known top speed, not the lagging estimate).
         resume_hysteresis_m: after a hold, the robot goes again only at S_p plus this, so that
             it does not chatter at the boundary.
     """
@@ -145,6 +147,16 @@ class SsmSettings:
     uncertainty_m: float = 0.01
     human_speed_m_s: float | None = None
     resume_hysteresis_m: float = 0.05
+
+    @staticmethod
+    def for_scenario(scenario) -> "SsmSettings":
+        """The loop's settings for a moving-bin scenario: v_h its cruise speed, the reaction its
+        estimate latency plus one period, and the uncertainty 1 cm plus how far the person walks
+        in that time (at 0.4 m/s: 9 cm; the estimate of where the person is now errs by 3.6 cm
+        median, 7.9 cm p95 at 0.4 m/s, the review's simulation)."""
+        reaction = scenario.estimate_latency_s + 1.0 / scenario.estimate_rate_hz
+        return SsmSettings(reaction_s=reaction, uncertainty_m=0.01 + scenario.speed_m_s * reaction,
+                           human_speed_m_s=scenario.speed_m_s)
 
 
 def protective_distance(*, human_speed_m_s: float, reaction_s: float, stop_time_s: float, robot_speed_m_s: float,
@@ -158,20 +170,36 @@ def protective_distance(*, human_speed_m_s: float, reaction_s: float, stop_time_
             + intrusion_m + uncertainty_m)
 
 
+def _tracked_points(robot_name: str, Q: np.ndarray) -> np.ndarray:
+    """(K, P, 3): the arm's tracked points at configurations Q (K, 7): every link origin (the
+    elbow's among them), the flange, the gripper frame and the finger tips."""
+    robot = load_robot(robot_name)
+    X = robot.link_poses(Q)  # (K, 9, 4, 4)
+    tip = X[:, G_INDEX] @ np.array([0.0, _finger_reach_m(robot_name), 0.0, 1.0])
+    return np.concatenate([X[:, 1:, :3, 3], (X[:, 7] @ robot.X_7F)[:, None, :3, 3], tip[:, None, :3]], axis=1)
+
+
 def stopping_motion(robot_name: str, q, v, a) -> tuple[float, float]:
     """(T_s in s, S_s in m): the duration of the suite's stopping blend from (q, v, a)
     (`splice.stopping_blend`, within the joint limits) and the farthest any tracked point of the
-    arm travels during it from where it starts: every link origin (the elbow's among them), the
-    flange, the gripper frame and the finger tips. (inf, inf) when no blend stops it."""
+    arm (`_tracked_points`) travels during it from where it starts. (inf, inf) when no blend
+    stops it."""
     robot = load_robot(robot_name)
     blend = stopping_blend(q, v, a, v_lim=robot.velocity_limits_rad_s, a_lim=robot.acceleration_limits_rad_s2,
                            q_lo=robot.lower_rad, q_hi=robot.upper_rad)
     if blend is None:
         return math.inf, math.inf
-    X = robot.link_poses(blend.q)  # (K, 9, 4, 4)
-    tip = X[:, G_INDEX] @ np.array([0.0, _finger_reach_m(robot_name), 0.0, 1.0])
-    points = np.concatenate([X[:, 1:, :3, 3], (X[:, 7] @ robot.X_7F)[:, None, :3, 3], tip[:, None, :3]], axis=1)
+    points = _tracked_points(robot_name, blend.q)
     return float(blend.duration_s), float(np.max(np.linalg.norm(points - points[:1], axis=-1)))
+
+
+def robot_speed(robot_name: str, q, v) -> float:
+    """v_r: the fastest tracked point of the arm (`_tracked_points`: link origins, flange, gripper,
+    finger tips), m/s, at joint positions q and velocities v (finite difference, h = 1e-4 s)."""
+    h = 1e-4
+    q = np.asarray(q, float)
+    p = _tracked_points(robot_name, np.stack([q, q + np.asarray(v, float) * h]))
+    return float(np.max(np.linalg.norm(p[1] - p[0], axis=-1)) / h)
 
 
 @functools.lru_cache(maxsize=None)

@@ -47,18 +47,23 @@ person) beside them. Jump: the largest jump of the command at a splice (position
 rad/s). Grasp-release: median time from the closed grasp to the release.
 """
 
-#: The fewest paired episodes over which a difference may be called established.
+#: The fewest paired episodes, and scenes, over which a difference may be called established.
 MIN_PAIRED = 10
+MIN_SCENES = 4
 
 PAIRED_CAPTION = (
     "Paired differences between planners. The unit is an episode: one scene, one seeded bin path, one "
     "speed (and latency and release mode), which every planner meets. For each episode both planners ran "
     "(status ok, at least one can attempted each), d = A's cans in the bin per can attempted minus B's; the "
     "table gives the episodes paired, the mean of d in percentage points and its 95% interval from a "
-    "percentile bootstrap over episodes (10,000 resamples, seed 0); established: the interval excludes 0; "
+    "percentile bootstrap (10,000 resamples, seed 0) over scenes, each with all its episodes: the bin paths of "
+    "one scene share its cans and static plans, so the scene is the independent unit; established: the "
+    "interval excludes 0; "
     "A ahead / B ahead: the episodes where each put more in the bin. \"all\" pools every speed. Over few "
     "episodes a percentile bootstrap interval is too narrow (over 2 it takes at most 3 values), so a difference "
-    f"is called established only over at least {MIN_PAIRED} paired episodes.")
+    f"is called established only over at least {MIN_PAIRED} paired episodes from {MIN_SCENES} scenes. No "
+    "correction for the number of comparisons (pairs x speeds) is made: read a single 'yes' among many rows "
+    "with that in mind.")
 
 #: The failure stages in the order of a replan, and their short names in a table cell.
 STAGES = ("goal_ik", "join", "planner", "validator", "person", "timing", "budget")
@@ -344,25 +349,36 @@ class PairedDifference:
     ci_pp: tuple[float, float] | None
     a_ahead: int = 0
     b_ahead: int = 0
+    scenes: int = 0
 
     @property
     def established(self) -> bool | None:
-        """The interval excludes 0, over at least MIN_PAIRED episodes (None: too few to say)."""
-        if self.ci_pp is None or self.n < MIN_PAIRED:
+        """The interval excludes 0, over at least MIN_PAIRED episodes from at least MIN_SCENES
+        scenes (None: too few to say)."""
+        if self.ci_pp is None or self.n < MIN_PAIRED or self.scenes < MIN_SCENES:
             return None
         return self.ci_pp[0] > 0 or self.ci_pp[1] < 0
 
 
-def bootstrap_mean_ci(d: np.ndarray, *, n_resamples: int = N_RESAMPLES, seed: int = BOOTSTRAP_SEED,
-                      level: float = 0.95) -> tuple[float, float]:
-    """Percentile-bootstrap interval of the mean of d, resampling its entries (default_rng(seed))."""
+def bootstrap_mean_ci(d: np.ndarray, *, clusters: Sequence | None = None, n_resamples: int = N_RESAMPLES,
+                      seed: int = BOOTSTRAP_SEED, level: float = 0.95) -> tuple[float, float]:
+    """Percentile-bootstrap interval of the mean of d (default_rng(seed)): resampling its entries,
+    or, with `clusters` (a label per entry), whole clusters: the episodes of one scene share its
+    cans and its static plans, so they are not independent (a cluster bootstrap)."""
     d = np.asarray(d, float)
     rng = np.random.default_rng(seed)
-    means = np.empty(n_resamples)
-    chunk = max(1, min(n_resamples, 2_000_000 // max(len(d), 1)))
-    for start in range(0, n_resamples, chunk):
-        stop = min(n_resamples, start + chunk)
-        means[start:stop] = d[rng.integers(0, len(d), size=(stop - start, len(d)))].mean(axis=1)
+    if clusters is not None:
+        labels = sorted(set(clusters), key=repr)
+        sums = np.array([sum(x for x, c in zip(d, clusters) if c == g) for g in labels])
+        counts = np.array([sum(1 for c in clusters if c == g) for g in labels], float)
+        pick = rng.integers(0, len(labels), size=(n_resamples, len(labels)))
+        means = sums[pick].sum(axis=1) / counts[pick].sum(axis=1)
+    else:
+        means = np.empty(n_resamples)
+        chunk = max(1, min(n_resamples, 2_000_000 // max(len(d), 1)))
+        for start in range(0, n_resamples, chunk):
+            stop = min(n_resamples, start + chunk)
+            means[start:stop] = d[rng.integers(0, len(d), size=(stop - start, len(d)))].mean(axis=1)
     alpha = (1 - level) / 2
     lo, hi = np.quantile(means, [alpha, 1 - alpha])
     return float(lo), float(hi)
@@ -381,11 +397,13 @@ def _episode_rates(records: Sequence[dict[str, Any]], planner: str) -> dict[tupl
 
 def _difference(a: str, b: str, keys: Sequence[tuple], ra: dict, rb: dict, group: tuple) -> PairedDifference:
     d = np.array([ra[k] - rb[k] for k in keys])
+    scenes = [(k[0], k[1]) for k in keys]  # the cluster: the scene (variant, seed)
     ahead = (int((d > 0).sum()), int((d < 0).sum()))
     if len(d) < 2:
-        return PairedDifference(a, b, *group, len(d), None, None, *ahead)
-    lo, hi = bootstrap_mean_ci(d)
-    return PairedDifference(a, b, *group, len(d), 100 * float(d.mean()), (100 * lo, 100 * hi), *ahead)
+        return PairedDifference(a, b, *group, len(d), None, None, *ahead, scenes=len(set(scenes)))
+    lo, hi = bootstrap_mean_ci(d, clusters=scenes if len(set(scenes)) > 1 else None)
+    return PairedDifference(a, b, *group, len(d), 100 * float(d.mean()), (100 * lo, 100 * hi), *ahead,
+                            scenes=len(set(scenes)))
 
 
 def paired_differences(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
@@ -429,11 +447,12 @@ def paired_rows(records: Sequence[dict[str, Any]], planners: Sequence[str] | Non
             row.append("all" if pooled else d.latency_mode)
         if modes_rel:
             row.append("all" if pooled else d.release_mode)
-        row += [d.n, f"{d.a_ahead} / {d.b_ahead}"]
+        row += [f"{d.n} ({d.scenes} scenes)", f"{d.a_ahead} / {d.b_ahead}"]
         if d.ci_pp is None:
             row += ["-", "-", "-"]
         else:
-            said = {True: "yes", False: "no", None: f"too few (< {MIN_PAIRED})"}[d.established]
+            said = {True: "yes", False: "no", None: f"too few (< {MIN_PAIRED} episodes or {MIN_SCENES} scenes)"}[
+                d.established]
             row += [_pp(d.mean_pp), f"[{_pp(d.ci_pp[0])}, {_pp(d.ci_pp[1])}]", said]
         rows.append(row)
     return headers, rows

@@ -169,7 +169,7 @@ def test_a_join_bends_the_motion_onto_the_new_path_without_stopping():
         stream.append_motion("blend", 0, join.blend, width_m=0.0, carrying=True)
         stream.append_motion("transit", 0, join.trajectory, width_m=0.0, carrying=True)
         for t in (t_s, t_s + join.blend.duration_s):
-            (q0, v0, a0), (q1, v1, a1) = stream.state(t - 1e-6), stream.state(t + 1e-6)
+            (q0, v0, _), (q1, v1, _) = stream.state(t - 1e-6), stream.state(t + 1e-6)
             assert np.max(np.abs(q1 - q0)) < 1e-4 and np.max(np.abs(v1 - v0)) < 1e-3 * 40
         # the blend matches the acceleration at both ends too (TOPP-RA's own is piecewise constant)
         assert np.allclose(join.blend.sample(0.0)[2], a_s, atol=1e-9)

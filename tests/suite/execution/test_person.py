@@ -182,6 +182,18 @@ def test_stopping_motion_grows_with_speed():
     assert 0 < out[0][1] < out[1][1] < out[2][1]
 
 
+def test_robot_speed_is_the_fastest_point_of_the_arm():
+    from suite.execution.person import robot_speed
+
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        v = rng.uniform(-1.0, 1.0, 7)
+        assert robot_speed(SPEC.robot, Q_READY, v) >= gripper_speed(SPEC.robot, Q_READY, v) - 1e-9
+    v = np.zeros(7)
+    v[3] = 1.0  # the elbow turns: the gripper moves, the base does not
+    assert robot_speed(SPEC.robot, Q_READY, v) > 0.1
+
+
 def test_gripper_speed_about_the_base_axis():
     v = np.zeros(7)
     v[0] = 0.5  # joint 1 spins the whole arm about the vertical axis

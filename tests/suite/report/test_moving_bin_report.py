@@ -4,6 +4,7 @@ import itertools
 import math
 
 import numpy as np
+import pytest
 from synthetic_runs import synthetic_records, write_run
 
 from suite.execution.jobs import read_moving_bin, write_moving_bin
@@ -226,6 +227,7 @@ def test_paired_differences_pair_episodes_by_their_bin_path(monkeypatch):
     import suite.report.summary_moving_bin as smb
 
     monkeypatch.setattr(smb, "MIN_PAIRED", 2)  # the arithmetic over few episodes (the rule: its own test)
+    monkeypatch.setattr(smb, "MIN_SCENES", 1)
     records = _paired_records()
     diffs = paired_differences(records, planners=("ik", "rrt"))
     at_02 = next(d for d in diffs if d.speed_m_s == 0.2)
@@ -247,9 +249,20 @@ def test_paired_differences_pair_episodes_by_their_bin_path(monkeypatch):
     assert headers[:3] == ["A - B", "speed (m/s)", "episodes paired"]
     cells = {r[1]: dict(zip(headers, r)) for r in rows}
     assert cells["0.2"]["mean difference (pp)"] == "+29.0" and cells["0.2"]["established"] == "yes"
-    assert cells["0.4"]["episodes paired"] == 1 and cells["0.4"]["mean difference (pp)"] == "-"
+    assert cells["0.4"]["episodes paired"] == "1 (1 scenes)" and cells["0.4"]["mean difference (pp)"] == "-"
     assert cells["0.4"]["established"] == "-"
-    assert cells["all"]["episodes paired"] == 6
+    assert cells["all"]["episodes paired"].startswith("6 (")
+
+
+def test_the_interval_resamples_scenes_not_episodes():
+    """Episodes of one scene move together: resampling scenes gives a wider interval than
+    resampling their episodes as if independent (here two scenes with opposite signs)."""
+    d = np.array([0.4, 0.4, 0.4, 0.4, -0.2, -0.2, -0.2, -0.2])
+    scenes = ["a"] * 4 + ["b"] * 4
+    lo_ep, hi_ep = bootstrap_mean_ci(d)
+    lo_sc, hi_sc = bootstrap_mean_ci(d, clusters=scenes)
+    assert hi_sc - lo_sc > hi_ep - lo_ep
+    assert lo_sc == pytest.approx(-0.2) and hi_sc == pytest.approx(0.4)  # all of a, all of b, or a mix
 
 
 def test_a_difference_over_too_few_episodes_is_never_established():
@@ -266,6 +279,7 @@ def test_a_difference_whose_interval_holds_zero_is_not_established(monkeypatch):
     import suite.report.summary_moving_bin as smb
 
     monkeypatch.setattr(smb, "MIN_PAIRED", 2)
+    monkeypatch.setattr(smb, "MIN_SCENES", 1)
     rates = [(5, 5, 0, 5), (0, 5, 5, 5), (4, 4, 3, 4), (3, 4, 4, 4), (2, 2, 2, 2)]  # d = +1, -1, +.25, -.25, 0
     records = []
     for seed, (ka, na, kb, nb) in enumerate(rates):
