@@ -354,13 +354,17 @@ class Episode(ReleaseSteps, PersonGuard):
         if self.arrived_t is not None and t - self.arrived_t > self.s.max_wait_s:
             self._give_up(t, f"not over the bin's opening after {self.s.max_wait_s:g} s")
             return
-        if self.s.aim == "centre":  # the control waits where it is for the bin to come under it
+        centre = self.s.aim == "centre"
+        if centre and np.max(np.abs(st.q_end - self.q_goal)) < 1e-3:
+            # the control waits over the region's centre for the bin to come under it
             st.append_hold("wait", self.can_id, self.period, width_from_m=0.0, carrying=True)
             return
         E = self._expected_latency()
         t_s = t + E
         lead = self._lead(t)
         predicted = self.estimator.predict(t, t_s + self.last_transit_s)
+        if centre:  # stopped short of the centre (a protective stop): go on to it
+            predicted, lead = np.mean(region(self.s, self.spec), axis=0), np.zeros(2)
         drift = float(np.linalg.norm(predicted + lead - self.target_xy))
         q = st.q_end
         z = np.zeros(7)
