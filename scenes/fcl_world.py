@@ -58,6 +58,23 @@ from scenes.scene import HeldCan, Scene
 GRIPPER_ASSEMBLY = frozenset({"iiwa_link_7", "body", "left_finger", "right_finger", "held_can"})
 
 
+def robot_parts(robot, opening_m: float, held_can: tuple | None = None) -> list[Part]:
+    """The robot's collision parts, each riding on one of the 9 FK bodies (the fingers on the
+    gripper's, at `opening_m`), and a held can's cylinder on the gripper: held_can is (X_GC,
+    (radius, height)) with any margin already added."""
+    finger_X = robot.finger_offsets(opening_m)
+    parts: list[Part] = []
+    for sh in robot.shapes:
+        if sh.body in finger_X:
+            body, X_BS = G_INDEX, finger_X[sh.body] @ sh.X_BS
+        else:
+            body, X_BS = robot.body_index(sh.body), sh.X_BS
+        parts.append(Part(sh.body, body, X_BS, sh.kind, sh.dims, robot.X_7G))
+    if held_can is not None:
+        parts.append(Part("held_can", G_INDEX, held_can[0], "cylinder", tuple(held_can[1]), robot.X_7G))
+    return parts
+
+
 class CollisionWorld(WorldBuild, MotionChecks):
     """Robot + scene collision queries with python-fcl (the numpy reference path; the planners'
     compiled path is `scenes.fcl_compiled.CompiledWorld`, which decides the same).
@@ -94,21 +111,13 @@ class CollisionWorld(WorldBuild, MotionChecks):
         opening = spec.grasp.open_width_m if gripper_opening_m is None else gripper_opening_m
         self.gripper_opening_m = opening
         self.held = held
-        finger_X = robot.finger_offsets(opening)
 
         # --- robot parts (every part rides on one of the 9 FK bodies) ---
-        parts: list[Part] = []
-        for sh in robot.shapes:
-            if sh.body in finger_X:
-                body, X_BS = G_INDEX, finger_X[sh.body] @ sh.X_BS
-            else:
-                body, X_BS = robot.body_index(sh.body), sh.X_BS
-            parts.append(Part(sh.body, body, X_BS, sh.kind, sh.dims, robot.X_7G))
+        held_can = None
         if held is not None:
             m = spec.grasp.held_margin_m
-            can_dims = (spec.can.radius_m + m, spec.can.height_m + 2 * m)
-            parts.append(Part("held_can", G_INDEX, held.X_GC, "cylinder", can_dims, robot.X_7G))
-        self.parts = parts
+            held_can = (held.X_GC, (spec.can.radius_m + m, spec.can.height_m + 2 * m))
+        self.parts = parts = robot_parts(robot, opening, held_can)
         self._req = fcl.CollisionRequest()
         self._dreq = fcl.DistanceRequest(enable_signed_distance=True)
 

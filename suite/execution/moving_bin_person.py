@@ -51,7 +51,6 @@ class PersonGuard:
 
         return check
 
-
     def _separation(self, t: float, q: np.ndarray) -> float:
         from suite.execution.person import robot_person_distance
 
@@ -61,7 +60,6 @@ class PersonGuard:
             self.spec.robot, q[None, :], person[None, :], self.s, self.spec,
             held_can=self.transit_template.held if carrying else None,
             opening_m=2 * self.spec.can.radius_m if carrying else self.open_w)[0])
-
 
     def _protective_stop(self, t: float) -> bool:
         """Speed and separation monitoring during a transit or a return: stop the arm when the
@@ -86,7 +84,6 @@ class PersonGuard:
         self.mode = "ssm_hold"
         return True
 
-
     def _hold_for_person(self, t: float) -> None:
         """At rest after a protective stop: go on when the person is clear, else hold a period."""
         from suite.execution.person import ssm_verdict
@@ -108,7 +105,6 @@ class PersonGuard:
             return
         width = self.stream.at(t).width(t)[0]
         self.stream.append_hold("wait", self.can_id, self.period, width_from_m=width, carrying=self.carrying(t))
-
 
     def _watch_person(self, t: float) -> None:
         """The true distance from the robot (measured joints) to the person: minimum and near misses."""

@@ -77,7 +77,6 @@ class ReleaseSteps:
 
     # --- events --------------------------------------------------------------------------------
 
-
     def _release_window(self, t: float, v: np.ndarray) -> bool:
         """Will the gripper, carried at the bin's estimated velocity `v` from now (after the ramp),
         stay over the opening by the prediction until the fingers have opened?"""
@@ -93,7 +92,6 @@ class ReleaseSteps:
             if not np.all(np.abs(gripper - self.estimator.predict(t, t + dt)) <= half):
                 return False
         return True
-
 
     def _release(self, t: float, v: np.ndarray) -> bool:
         """Open the gripper over the bin: following the bin at v (moving), or standing still."""
@@ -180,16 +178,13 @@ class ReleaseSteps:
         self.cans.append(CanEpisode(self.can_id, False, None, None, gave_up=why))
         self._halt(t, "stop")
         self.mode = "put_down"
-        self.gave_up_t = t
-
 
     def _put_down(self, t: float) -> None:
         """Carry the given-up can back over its place, lower it (the lift reversed), open, and
-        retreat (the descend reversed)."""
+        retreat (the descend and the approach reversed)."""
         st, c = self.stream, self.can_id
         q = st.q_end
         q_lift = np.asarray(self.lift.q[-1], float)
-        res = None
         if np.max(np.abs(q - q_lift)) > 1e-3:
             z = np.zeros(7)
             res = self._plan(template=self.transit_template.with_(X_WG_goal=self.X_plate), t=t,
@@ -214,7 +209,6 @@ class ReleaseSteps:
         self.cans[-1] = dataclasses.replace(last, put_down=True)
         self.mode = "put_down_done"
         self.released_t = st.duration_s
-
 
     def _plan_return(self, t: float) -> None:
         q = self.stream.q_end

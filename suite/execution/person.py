@@ -23,7 +23,8 @@ from typing import Callable
 import fcl
 import numpy as np
 
-from scenes.fcl_shapes import G_INDEX, Part, aabb_half_extents, bounding_radius
+from scenes.fcl_shapes import G_INDEX, aabb_half_extents, bounding_radius
+from scenes.fcl_world import robot_parts
 from scenes.robot_model import load_robot
 from suite.execution.splice import stopping_blend
 
@@ -35,17 +36,8 @@ def _robot_parts(robot_name: str, opening_m: float, held: tuple | None):
     """The robot's parts as in `CollisionWorld`: FK body indices (P,), poses in their bodies
     (P, 4, 4), bounding radii about their origins (P,) and FCL objects (moved per query: one
     caller per thread). held: (X_GC as a 16-tuple, can radius, can height) grown already."""
-    robot = load_robot(robot_name)
-    finger_X = robot.finger_offsets(opening_m)
-    parts = []
-    for sh in robot.shapes:
-        if sh.body in finger_X:
-            parts.append(Part(sh.body, G_INDEX, finger_X[sh.body] @ sh.X_BS, sh.kind, sh.dims, robot.X_7G))
-        else:
-            parts.append(Part(sh.body, robot.body_index(sh.body), sh.X_BS, sh.kind, sh.dims, robot.X_7G))
-    if held is not None:
-        X_GC = np.array(held[0], float).reshape(4, 4)
-        parts.append(Part("held_can", G_INDEX, X_GC, "cylinder", held[1:], robot.X_7G))
+    held_can = None if held is None else (np.array(held[0], float).reshape(4, 4), held[1:])
+    parts = robot_parts(load_robot(robot_name), opening_m, held_can)
     body = np.array([p.body for p in parts])
     X_BS = np.stack([p.X_BS for p in parts])
     radius = np.array([bounding_radius(p.kind, p.dims) for p in parts])
