@@ -168,6 +168,13 @@ def add_scene_to_plant(
             continue  # on the driven body
         _add_obstacle(plant, obstacle, friction, plate_body if obstacle.name == "plate" else None)
 
+    if mode == "sim":
+        # The room's floor (40 m square): a can that falls off the table comes to rest on it, instead of falling
+        # for ever (a free body spinning in free fall grows its spin in the discrete solver's
+        # explicit gyroscopic terms until its pose is no longer finite). No planner sees it.
+        plant.RegisterCollisionGeometry(plant.world_body(), RigidTransform([0.0, 0.0, -ROOM_FLOOR_BELOW_TABLE_M - 0.5]),
+                                        DrakeBox(40.0, 40.0, 1.0), "room_floor", friction)
+
     can_shape = Cylinder(spec.can.radius_m, spec.can.height_m)
     color = np.asarray(spec.can.color_rgba)
     held_id = held.can.id if held is not None else None
@@ -209,6 +216,9 @@ def add_scene_to_plant(
         scene_graph.collision_filter_manager().Apply(decl)
     return iiwa, wsg
 
+
+#: How far below the table top the room's floor is ("sim" mode only): a common table's height.
+ROOM_FLOOR_BELOW_TABLE_M = 0.75
 
 #: The model instance of a driven bin, its two prismatic joints (displacements from the spec's
 #: bin centre, m) and its bodies.

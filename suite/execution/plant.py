@@ -67,6 +67,25 @@ class Simulation:
         origin = self.plant.GetFrameByName("bin_origin").GetFixedPoseInBodyFrame().translation()[:2]
         return np.asarray(origin, float) + self.plant.GetPositions(self.pc, self.moving_bin)
 
+    def lock_fallen(self, bodies) -> list[str]:
+        """Lock where it lies every body of `bodies` (free cans) that has fallen to the room's
+        floor (its centre lower than halfway down to it), once: out of play. A point-contact
+        cylinder spinning on the floor would otherwise roll for ever, its spin growing in the
+        discrete solver's explicit gyroscopic terms until its pose is no longer finite. Returns
+        the names of the bodies locked now."""
+        from scenes.drake_scene import ROOM_FLOOR_BELOW_TABLE_M
+
+        locked = []
+        for body in bodies:
+            joint = self.plant.GetJointByName(body.name(), body.model_instance()) \
+                if self.plant.HasJointNamed(body.name(), body.model_instance()) else None
+            if joint is None or joint.is_locked(self.pc):
+                continue
+            if self.plant.EvalBodyPoseInWorld(self.pc, body).translation()[2] < -ROOM_FLOOR_BELOW_TABLE_M / 2:
+                joint.Lock(self.pc)
+                locked.append(body.name())
+        return locked
+
 
 #: A bin drive: the desired displacement of the bin centre from the spec's (2,), m, and its
 #: velocity (2,), m/s, at a time (s).

@@ -188,3 +188,35 @@ def test_dataset_execution_picks_cans_whose_steps_are_all_outside_the_benchmark(
     assert all(path is not None for path in paths[3])  # can 3: five stored trivial steps, all executable
     (failed_4,) = [f for c, _, f in job.cans if c == 4]
     assert failed_4 == "return not in the dataset"  # its last return is stored once, under another scene
+
+
+def test_a_can_flung_off_the_table_is_locked_and_the_simulation_stays_finite():
+    """The moving bin's 'non-finite pose' error: a can struck off the table fell for ever, its spin
+    growing in the discrete solver until its pose overflowed. It now stops below the table, locked."""
+    from pydrake.math import RigidTransform
+    from pydrake.multibody.math import SpatialVelocity
+
+    from suite.execution.commands import CommandStream
+    from suite.execution.config import ExecutionConfig
+    from suite.execution.monitor import Monitor
+    from suite.execution.plant import build_simulation
+
+    scene = generate_scene(load_spec(variant="open"), seed=3)
+    config = ExecutionConfig()
+    q_home = np.zeros(7)
+    stream = CommandStream(q_home=q_home, open_width_m=scene.spec.grasp.open_width_m, config=config)
+    stream.append_hold("wait", None, 8.0, width_from_m=scene.spec.grasp.open_width_m, carrying=False)
+    sim = build_simulation(scene, stream, q_home=q_home, config=config)
+    monitor = Monitor(sim, scene, stream, lambda: 0.0)
+    can = monitor.can_bodies[scene.cans[0].id]
+    x_edge = scene.spec.table.center_m[0] + scene.spec.table.size_m[0] / 2
+    sim.plant.SetFreeBodyPose(sim.pc, can, RigidTransform([x_edge + 0.3, 0.0, 0.2]))
+    sim.plant.SetFreeBodySpatialVelocity(sim.pc, can, SpatialVelocity(w=[30.0, 45.0, 10.0], v=[2.4, -0.5, 1.0]))
+    sim.simulator.Initialize()
+    for k in range(1, 401):  # 8 s, as the monitor checks it
+        sim.simulator.AdvanceTo(k * 0.02)
+        monitor.check(sim.root, full=True)
+    p = sim.plant.EvalBodyPoseInWorld(sim.pc, can).translation()
+    assert np.all(np.isfinite(p)) and p[2] < -0.3
+    assert sim.plant.GetJointByName(can.name()).is_locked(sim.pc)
+    assert monitor.fates([])[0].where == "elsewhere"
