@@ -365,9 +365,12 @@ def _failed(job: ExecutionJob, message: str) -> dict[str, Any]:
 
 def write_moving_bin(out: Path, records: Sequence[dict[str, Any]]) -> Path:
     """Write the run's moving_bin.json (atomically)."""
+    from suite.execution.moving_bin_records import FORMAT_VERSION
+
     path = Path(out) / MOVING_BIN_FILE
     tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"format_version": 1, "moving_bin": list(records)}, indent=1), encoding="utf-8")
+    tmp.write_text(json.dumps({"format_version": FORMAT_VERSION, "moving_bin": list(records)}, indent=1),
+                   encoding="utf-8")
     tmp.replace(path)
     return path
 

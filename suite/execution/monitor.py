@@ -212,7 +212,7 @@ class Monitor:
         self._touching = set(now)
         if not full:
             return
-        self._sim.lock_fallen(self.can_bodies.values())  # a can on the room's floor is out of play
+        self._sim.settle_fallen(self.can_bodies.values(), self._spec.can.height_m)  # a fallen can: out of play
         bin_xy = self.bin_xy()
         for can_id, body in self.can_bodies.items():
             if can_id not in self.in_bin_at:

@@ -114,6 +114,9 @@ class Episode(ReleaseSteps, PersonGuard):
         self.plan_wall = 0.0
         self.last_transit_s = TRANSIT_GUESS_S
         self.ssm_holds = 0
+        self.escapes = 0  # this can's (`moving_bin_person.ESCAPE_TRIES`)
+        self.escapes_total = 0
+        self.escaping_until = -1.0
         self.pending_offset = None  # (index in cans, time) of a release whose offset is measured then
         self.person_min = np.inf
         self.near_misses = 0
@@ -201,6 +204,12 @@ class Episode(ReleaseSteps, PersonGuard):
         self.done = True
 
     def on_stream_end(self, t: float) -> None:
+        """The arm has reached the end of its commands, at rest: the mode's next step, unless the
+        person has walked into the arm standing there (then an escape first)."""
+        if self.mode in ("transit", "released", "put_down", "put_down_done", "ssm_hold") and self._crowded(t) \
+                and self._escape(t):
+            self.escapes_total += 1
+            return
         handler = {"idle": self._next_can, "lift": self.on_lift_start, "await_transit": self._retry_transit,
                    "transit": self._arrived, "released": self._plan_return, "returning": self._next_can,
                    "put_down": self._put_down, "put_down_done": self._plan_return,
@@ -229,6 +238,7 @@ class Episode(ReleaseSteps, PersonGuard):
         self.arrived_t = None
         self.busy_until = 0.0
         self.put_down_tries = 0
+        self.escapes = 0
 
     def _over_time(self, t: float) -> bool:
         """Give the can up if its time from the grasp ran out (every carrying phase)."""

@@ -14,6 +14,14 @@ A mixin of `suite.execution.moving_bin_episode.Episode` over the geometry and fo
   stopping blend of the commanded state, not measured in the physics), with the position
   uncertainty of `SsmSettings.for_scenario`. Nearer: a protective stop;
   the arm replans from rest once the person is clear by `resume_hysteresis_m`;
+- `_escape`: when the person has walked to within `person_margin_m` of the arm standing still
+  (waiting for a plan, after a protective stop, or holding over the bin), the gripper backs away
+  from them, horizontally at `ESCAPE_SPEED_M_S` and up at `ESCAPE_RISE_M_S`, by differential IK
+  (`suite.execution.track.tracking_motion`), then stops; the motion is validated in the world of
+  the moment without the person (`suite.execution.replan.static_reason`: it starts inside their
+  margin and leads away), straight away first, then 45 degrees to either side. The loop then
+  plans again from there. Not checked against the person's predicted path: it moves away from
+  where they are, not from where they will be;
 - `_watch_person`: the true distance (measured joints, the person's true place) every 10 ms:
   its minimum and the near misses (passes under `near_miss_m`).
 """
@@ -21,6 +29,15 @@ A mixin of `suite.execution.moving_bin_episode.Episode` over the geometry and fo
 from __future__ import annotations
 
 import numpy as np
+
+#: The escape: the gripper's horizontal speed away from the person and its rise (m/s), the ramp
+#: to that speed and the whole motion before the stop (s): about 9 cm away and 3 cm up.
+ESCAPE_SPEED_M_S = 0.25
+ESCAPE_RISE_M_S = 0.08
+ESCAPE_RAMP_S = 0.15
+ESCAPE_S = 0.45
+#: Escapes a can may make; past them the loop waits as before (its time limits still hold).
+ESCAPE_TRIES = 8
 
 
 class PersonGuard:
@@ -66,8 +83,8 @@ class PersonGuard:
         person (by the estimate) is nearer than the protective separation distance."""
         from suite.execution.person import robot_speed, ssm_verdict, stopping_motion
 
-        if self.mode not in ("transit", "returning") or t >= self.stream.duration_s:
-            return False
+        if self.mode not in ("transit", "returning") or t >= self.stream.duration_s or t < self.escaping_until:
+            return False  # at rest, or escaping (away from the person)
         q, v, a = self.stream.state(t)
         if np.max(np.abs(v)) < 1e-6:
             return False
@@ -105,6 +122,51 @@ class PersonGuard:
             return
         width = self.stream.at(t).width(t)[0]
         self.stream.append_hold("wait", self.can_id, self.period, width_from_m=width, carrying=self.carrying(t))
+
+    def _crowded(self, t: float) -> bool:
+        """Has the person (by the estimate) come within the person margin of the arm at rest?"""
+        return self.s.person_margin_m > 0 and self._separation(t, self.stream.q_end) < self.s.person_margin_m
+
+    def _escape(self, t: float) -> bool:
+        """Back the gripper away from the person who walked into the standing arm (module
+        docstring), from rest at the stream's end; False if no escape is valid (or none is left)."""
+        from suite.execution.replan import static_reason
+        from suite.execution.splice import stopping_blend
+        from suite.execution.track import tracking_motion
+
+        if self.escapes >= ESCAPE_TRIES:
+            return False
+        st = self.stream
+        q = st.q_end
+        person = self.estimator.predict(t, t) + self.person_offset
+        away = self.robot.gripper_pose(q[None, :])[0][:2, 3] - person
+        away = away / max(float(np.linalg.norm(away)), 1e-9)
+        held = self.carrying(t)
+        template = self.transit_template if held else self.return_template
+        r = self.robot
+        for angle in (0.0, np.pi / 4, -np.pi / 4):
+            c, s_ = np.cos(angle), np.sin(angle)
+            d = np.array([c * away[0] - s_ * away[1], s_ * away[0] + c * away[1]])
+            track = tracking_motion(self.spec.robot, q, np.array([*(ESCAPE_SPEED_M_S * d), ESCAPE_RISE_M_S]),
+                                    ramp_s=ESCAPE_RAMP_S, duration_s=ESCAPE_S)
+            if track is None:
+                continue
+            qe, ve, _ = track.sample(track.duration_s)
+            stop = stopping_blend(qe, ve, np.zeros(7), v_lim=r.velocity_limits_rad_s, a_lim=r.acceleration_limits_rad_s2,
+                                  q_lo=r.lower_rad, q_hi=r.upper_rad)
+            if stop is None:
+                continue
+            dense = np.concatenate([track.sample(np.linspace(0.0, track.duration_s, 24))[0],
+                                    stop.sample(np.linspace(0.0, stop.duration_s, 12))[0]])
+            if static_reason(template, self.s, self.estimator.predict(t, t), dense) is not None:
+                continue
+            self.escapes += 1
+            width = st.at(t).width(t)[0]
+            st.append_motion("escape", self.can_id, track, width_m=width, carrying=held)
+            st.append_motion("escape", self.can_id, stop, width_m=width, carrying=held)
+            self.escaping_until = st.duration_s
+            return True
+        return False
 
     def _watch_person(self, t: float) -> None:
         """The true distance from the robot (measured joints) to the person: minimum and near misses."""

@@ -19,9 +19,9 @@ from scenes.moving_bin import MovingBinScenario
 from scenes.scene import Scene
 from suite.execution.config import ExecutionConfig
 
-#: moving_bin.json's format: 2 added the non-stopping loop's fields (a record without them is
-#: format 1, read with their defaults).
-FORMAT_VERSION = 2
+#: moving_bin.json's format: 2 added the non-stopping loop's fields, 3 the escapes (a record
+#: without them is of an earlier format, read with their defaults; files before 3 say 1).
+FORMAT_VERSION = 3
 
 #: A release counts as on the move above this gripper speed (an estimate of a still bin is noise).
 MOVING_RELEASE_M_S = 0.02
@@ -175,6 +175,7 @@ class MovingBinRecord:
     person_min_distance_m: float | None = None
     near_misses_person: int = 0
     ssm_holds: int = 0
+    escapes: int = 0
     collisions: int = 0
     sim_time_s: float = 0.0
     wall_time_s: float | None = 0.0
@@ -296,7 +297,7 @@ def episode_record(ep, monitor, fates, wall: float) -> MovingBinRecord:
         release_speed_median_m_s=quantile([c.release_speed_m_s or 0.0 for c in released], 0.5),
         contacts_bin=monitor.moving_contacts["bin"], contacts_person=monitor.moving_contacts["person"],
         person_min_distance_m=None if not np.isfinite(ep.person_min) else ep.person_min,
-        near_misses_person=ep.near_misses, ssm_holds=ep.ssm_holds,
+        near_misses_person=ep.near_misses, ssm_holds=ep.ssm_holds, escapes=ep.escapes_total,
         collisions=monitor.n_episodes, sim_time_s=ep.stream.duration_s,
         wall_time_s=None if ep.modelled else wall,
         stopped=ep.stopped, cans=tuple(ep.cans), fates=tuple(f.to_json() for f in fates),

@@ -67,24 +67,30 @@ class Simulation:
         origin = self.plant.GetFrameByName("bin_origin").GetFixedPoseInBodyFrame().translation()[:2]
         return np.asarray(origin, float) + self.plant.GetPositions(self.pc, self.moving_bin)
 
-    def lock_fallen(self, bodies) -> list[str]:
-        """Lock where it lies every body of `bodies` (free cans) that has fallen to the room's
-        floor (its centre lower than halfway down to it), once: out of play. A point-contact
-        cylinder spinning on the floor would otherwise roll for ever, its spin growing in the
-        discrete solver's explicit gyroscopic terms until its pose is no longer finite. Returns
-        the names of the bodies locked now."""
+    def settle_fallen(self, bodies, height_m: float) -> list[str]:
+        """Put every body of `bodies` (free cans, `height_m` tall) whose centre has fallen lower
+        than halfway to the room's floor upright at rest on the floor below where it is: out of
+        play. A can struck off the table would otherwise fall and roll on, its spin growing in the
+        discrete solver's explicit gyroscopic terms until its pose is no longer finite. (Locking
+        its joint instead crashed Drake 1.51's SAP solver.) Returns the names of the bodies moved."""
+        from pydrake.math import RigidTransform
+        from pydrake.multibody.math import SpatialVelocity
+
         from scenes.drake_scene import ROOM_FLOOR_BELOW_TABLE_M
 
-        locked = []
+        floor = -ROOM_FLOOR_BELOW_TABLE_M
+        moved = []
         for body in bodies:
-            joint = self.plant.GetJointByName(body.name(), body.model_instance()) \
-                if self.plant.HasJointNamed(body.name(), body.model_instance()) else None
-            if joint is None or joint.is_locked(self.pc):
+            p = self.plant.EvalBodyPoseInWorld(self.pc, body).translation()
+            if p[2] >= floor / 2:
                 continue
-            if self.plant.EvalBodyPoseInWorld(self.pc, body).translation()[2] < -ROOM_FLOOR_BELOW_TABLE_M / 2:
-                joint.Lock(self.pc)
-                locked.append(body.name())
-        return locked
+            V = self.plant.EvalBodySpatialVelocityInWorld(self.pc, body)
+            rest = [p[0], p[1], floor + height_m / 2]
+            if abs(p[2] - rest[2]) > 1e-3 or np.linalg.norm(V.get_coeffs()) > 1e-2:
+                self.plant.SetFreeBodyPose(self.pc, body, RigidTransform(rest))
+                self.plant.SetFreeBodySpatialVelocity(self.pc, body, SpatialVelocity.Zero())
+                moved.append(body.name())
+        return moved
 
 
 #: A bin drive: the desired displacement of the bin centre from the spec's (2,), m, and its

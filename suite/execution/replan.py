@@ -97,6 +97,21 @@ def _waypoints(robot, q_b: np.ndarray, poses: list[np.ndarray], t0: float) -> tu
     return tuple(out)
 
 
+def static_reason(template: PlanningProblem, scenario: MovingBinScenario, bin_xy_m, polyline: np.ndarray) -> str | None:
+    """The validator's verdict on a motion (its dense polyline) in the world of the moment without
+    the person: the station with the bin at bin_xy_m. For an escape, which starts where the person
+    has walked into the arm and leads away from them."""
+    from planners.worlds import collision_world
+    from suite.scoring.validate import validate_path
+
+    spec = template.scene.spec
+    b = dataclasses.replace(spec.bin, center_xy_m=(float(bin_xy_m[0]), float(bin_xy_m[1])))
+    scene = Scene(dataclasses.replace(spec, bin=b), template.scene.seed, template.scene.cans)
+    polyline = np.asarray(polyline, float)
+    problem = template.with_(scene=scene, q_start=polyline[0], q_goal=polyline[-1])
+    return validate_path(problem, polyline, collision_world(problem))
+
+
 def plan_online(
     *,
     planner,

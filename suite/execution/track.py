@@ -128,7 +128,8 @@ def tracking_motion(robot_name: str, q0: np.ndarray, v_xy_m_s: np.ndarray, *, ra
                     dt_s: float = 0.01) -> TrackTrajectory | None:
     """The arm's motion from rest at q0 that brings the gripper to the planar velocity v_xy_m_s
     (2,) over ramp_s and keeps it until duration_s (s), its height and orientation held (see the
-    module docstring); the grid step is at most dt_s.
+    module docstring); the grid step is at most dt_s. A (3,) velocity also moves the gripper up or
+    down (an escape from the person).
 
     Returns None when differential IK finds no solution at some step or the final gripper pose is
     off the ideal one by more than POSITION_TOLERANCE_M or ORIENTATION_TOLERANCE_RAD (a velocity
@@ -149,7 +150,8 @@ def tracking_motion(robot_name: str, q0: np.ndarray, v_xy_m_s: np.ndarray, *, ra
     plant, G = _arm(robot_name)
     ctx = plant.CreateDefaultContext()
     q0 = np.asarray(q0, float)
-    v = np.array([*np.asarray(v_xy_m_s, float), 0.0])
+    v = np.zeros(3)
+    v[:len(np.atleast_1d(v_xy_m_s))] = np.asarray(v_xy_m_s, float)  # (2,) planar, or (3,) with a rise
     n = max(1, math.ceil(duration_s / dt_s - 1e-9))
     t_grid = np.linspace(0.0, duration_s, n + 1)
     params = DifferentialInverseKinematicsParameters(7, 7)

@@ -190,9 +190,9 @@ def test_dataset_execution_picks_cans_whose_steps_are_all_outside_the_benchmark(
     assert failed_4 == "return not in the dataset"  # its last return is stored once, under another scene
 
 
-def test_a_can_flung_off_the_table_is_locked_and_the_simulation_stays_finite():
+def test_a_can_flung_off_the_table_comes_to_rest_and_the_simulation_stays_finite():
     """The moving bin's 'non-finite pose' error: a can struck off the table fell for ever, its spin
-    growing in the discrete solver until its pose overflowed. It now stops below the table, locked."""
+    growing in the discrete solver until its pose overflowed. It now rests on the room's floor."""
     from pydrake.math import RigidTransform
     from pydrake.multibody.math import SpatialVelocity
 
@@ -218,5 +218,5 @@ def test_a_can_flung_off_the_table_is_locked_and_the_simulation_stays_finite():
         monitor.check(sim.root, full=True)
     p = sim.plant.EvalBodyPoseInWorld(sim.pc, can).translation()
     assert np.all(np.isfinite(p)) and p[2] < -0.3
-    assert sim.plant.GetJointByName(can.name()).is_locked(sim.pc)
+    assert np.linalg.norm(sim.plant.EvalBodySpatialVelocityInWorld(sim.pc, can).get_coeffs()) < 1e-2  # at rest
     assert monitor.fates([])[0].where == "elsewhere"

@@ -263,6 +263,49 @@ def test_a_static_bin_through_the_loop_reproduces_todays_execution():
         assert np.linalg.norm(np.array(f["p_WC_m"][:2]) - np.array(c.p_WC_m[:2])) < 0.2
 
 
+def test_an_arm_the_person_walks_into_backs_away_from_them():
+    """Standing over the bin with the person (by the estimate) pressed against it, the arm escapes:
+    it backs away, rises, and stops, validated in the world without the person; it ends farther
+    from them than it started, and the command is continuous."""
+    from planners.registry import planner_class
+    from planners.worlds import drake_plan_scene
+    from scenes.ik import IkOptions, PoseIk
+    from scenes.moving_bin import drop_pose
+    from suite.execution.commands import CommandStream
+    from suite.execution.moving_bin_episode import Episode
+    from suite.run.trial import make_config
+
+    job = _job(cans=1, variant="open", seed=2, speed_m_s=0.0, estimate_noise_m=0.0)
+    cls = planner_class("rrt")
+    ep = Episode(job, cls(make_config(cls, None)))
+    ep._next_can(0.0)  # the can's problems
+    spec, t = job.scene.spec, 1.0
+    bin_xy = ep.estimator.predict(t, t)
+    q = PoseIk(drake_plan_scene(ep.transit_template)).solve(
+        drop_pose(spec, bin_xy), q_seed=np.asarray(job.q_home), rng=np.random.default_rng(0),
+        options=IkOptions(free_yaw=True))
+    assert q is not None
+    ep.stream = CommandStream(q_home=q, open_width_m=spec.grasp.open_width_m, config=job.config)
+    ep.stream.append_hold("wait", ep.can_id, t, width_from_m=0.0, carrying=True)
+    ep.mode = "transit"
+    # the person steps toward the gripper until 2 cm from the arm: inside its 5 cm margin
+    towards = ep.robot.gripper_pose(q[None, :])[0][:2, 3] - (bin_xy + ep.person_offset)
+    ep.person_offset = ep.person_offset + (ep._separation(t, q) - 0.02) * towards / np.linalg.norm(towards)
+    before = ep._separation(t, q)
+    assert ep._crowded(t), before
+    ep.on_stream_end(t)
+    assert ep.escapes_total == 1 and [s.phase for s in ep.stream.segments][-2:] == ["escape", "escape"]
+    after = ep._separation(t, ep.stream.q_end)
+    assert after > before + 0.05
+    assert ep.robot.gripper_pose(ep.stream.q_end[None, :])[0][2, 3] > ep.robot.gripper_pose(q[None, :])[0][2, 3]
+    ts = np.linspace(t, ep.stream.duration_s, 400)
+    qs = np.array([ep.stream.state(x)[0] for x in ts])
+    assert np.max(np.abs(np.diff(qs, axis=0))) < 0.02  # no jump
+    assert np.max(np.abs(ep.stream.state(ep.stream.duration_s)[1])) < 1e-6  # at rest at its end
+    # the arm is clear now: no second escape
+    assert not ep._crowded(t)
+
+
 @pytest.mark.slow
 def test_speed_and_separation_monitoring_stops_the_arm_near_the_person():
     """The person stands beside a still bin: the arm, arriving fast over the bin next to them,
