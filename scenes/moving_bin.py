@@ -94,6 +94,10 @@ class MovingBinScenario:
             predicted bin by the ramp's lag. "rest": the arm releases standing still, when the
             bin is under it now and at the end of the opening.
         track_ramp_s: the release's acceleration to the bin's velocity.
+        track_feedback: during the ramp and the opening, until the fingers let the can go, every
+            new estimate re-aims the gripper (the bin's new velocity, corrected toward its
+            predicted centre) and the return is planned again; False holds the velocity estimated
+            on arrival (open loop).
         aim: "predicted": the transit aims at where the bin is predicted on arrival and is
             replanned as the prediction drifts; "centre": a control without replanning: the arm
             carries the can over the centre of the bin's region and waits there for the bin to come
@@ -133,6 +137,7 @@ class MovingBinScenario:
     can_time_limit_s: Pos = 20.0
     release: Literal["moving", "rest"] = "moving"
     track_ramp_s: Pos = 0.15
+    track_feedback: bool = True
     aim: Literal["predicted", "centre"] = "predicted"
     person_margin_m: NonNeg = 0.05
     ssm: bool = True

@@ -117,6 +117,7 @@ class Episode(ReleaseSteps, PersonGuard):
         self.escapes = 0  # this can's (`moving_bin_person.ESCAPE_TRIES`)
         self.escapes_total = 0
         self.escaping_until = -1.0
+        self.releasing = None  # (opening starts, ends, lets the can go) of a release re-aimed at estimates
         self.pending_offset = None  # (index in cans, time) of a release whose offset is measured then
         self.person_min = np.inf
         self.near_misses = 0
@@ -239,6 +240,7 @@ class Episode(ReleaseSteps, PersonGuard):
         self.busy_until = 0.0
         self.put_down_tries = 0
         self.escapes = 0
+        self.releasing = None
 
     def _over_time(self, t: float) -> bool:
         """Give the can up if its time from the grasp ran out (every carrying phase)."""
@@ -294,7 +296,11 @@ class Episode(ReleaseSteps, PersonGuard):
 
     def on_estimate(self, t: float) -> None:
         """A new estimate: the time limit, the person's separation, then the drift of the transit."""
-        if self.done or self._over_time(t):
+        if self.done:
+            return
+        if self.releasing is not None:
+            self._track_update(t)
+        if self._over_time(t):
             return
         if self.s.ssm and self._protective_stop(t):
             return

@@ -19,7 +19,7 @@ from scenes.moving_bin import MovingBinScenario
 from scenes.scene import Scene
 from suite.execution.config import ExecutionConfig
 
-#: moving_bin.json's format: 2 added the non-stopping loop's fields, 3 the escapes (a record
+#: moving_bin.json's format: 2 added the non-stopping loop's fields, 3 the escapes and the release's updates (a record
 #: without them is of an earlier format, read with their defaults; files before 3 say 1).
 FORMAT_VERSION = 3
 
@@ -67,7 +67,8 @@ class ReplanEvent:
         can_id: the can in the gripper (or just released, for a return).
         trigger: "lift" (the first transit), "drift" (the prediction moved during the transit),
             "arrival" (not over the opening on arrival), "resume" (after a protective stop),
-            "return", "put_down" (a given-up can carried back to its place).
+            "return", "put_down" (a given-up can carried back to its place), "track" (the
+            release re-aimed at a new estimate, `track_feedback`; not a plan: latency 0).
         drift_m: the predicted drop position's distance from the planned one (drift, arrival).
         latency_s: its latency (wall time, or the declared constant in modelled mode).
         deadline_s: its deadline (deadline-bound plans in measured mode), or None.
@@ -77,7 +78,7 @@ class ReplanEvent:
         reason, stage: a failure's reason and its stage (`suite.execution.replan.STAGES`).
         jump_q_rad, jump_v_rad_s: the largest joint jump of the command at the splice and where
             the blend meets the new path (spliced only; ~0 by construction).
-        splice_speed_rad_s: the largest joint speed of the command at the splice (spliced).
+        splice_speed_rad_s: the largest joint speed of the command at the splice (spliced, track).
         join_at_rest: the join ended at rest (no moving join within the limits).
         expected_latency_s: the latency the splice time was chosen for.
         parts_s: wall time per step (measured mode only).
@@ -169,6 +170,7 @@ class MovingBinRecord:
     splice_jump_v_rad_s: float | None = None
     grasp_to_release_median_s: float | None = None
     releases_moving: int = 0
+    release_updates: int = 0
     release_speed_median_m_s: float | None = None
     contacts_bin: int = 0
     contacts_person: int = 0
@@ -294,6 +296,7 @@ def episode_record(ep, monitor, fates, wall: float) -> MovingBinRecord:
         splice_jump_v_rad_s=max((e.jump_v_rad_s for e in spliced), default=None),
         grasp_to_release_median_s=quantile([c.grasp_to_release_s for c in released], 0.5),
         releases_moving=sum(1 for c in released if (c.release_speed_m_s or 0) > 0),
+        release_updates=sum(1 for e in ep.events if e.trigger == "track" and e.outcome == "spliced"),
         release_speed_median_m_s=quantile([c.release_speed_m_s or 0.0 for c in released], 0.5),
         contacts_bin=monitor.moving_contacts["bin"], contacts_person=monitor.moving_contacts["person"],
         person_min_distance_m=None if not np.isfinite(ep.person_min) else ep.person_min,

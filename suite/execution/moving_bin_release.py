@@ -14,6 +14,11 @@ estimator, the can's lift and descend, the templates), one job per method:
   retreats by the descend and the approach played backwards (the way it came, in the same world:
   the start of a return planned from the pre-grasp would sit within the margins of the can it just
   let go): the can is back on the plate, the next can follows;
+- `_track_update` (`track_feedback`): at every new estimate during the ramp and the opening, until
+  the fingers let the can go, the gripper is re-aimed: its velocity ramps from the commanded one
+  to the bin's new estimated velocity plus a correction toward the bin's predicted centre (what
+  is left of the offset over the time until the can is let go, at most TRACK_CORRECTION_M_S),
+  and the return is planned again from the new end of the opening;
 - `_plan_return`: the return to above the plate (or to the next can's approach) from rest.
 
 A put-down's and a return's world has the bin and the person where they are estimated now (the
@@ -32,6 +37,11 @@ from suite.execution.splice import stopping_blend
 
 #: Tries of a put-down plan before the episode stops with the can in the gripper.
 PUT_DOWN_TRIES = 3
+#: A release re-aimed at a new estimate takes over this long after it (s): differential IK over
+#: the rest of the opening (a few milliseconds) and the command's next period.
+TRACK_UPDATE_S = 0.02
+#: The largest correction of the release's velocity toward the bin's predicted centre (m/s).
+TRACK_CORRECTION_M_S = 0.2
 
 
 class Window:
@@ -111,6 +121,9 @@ class ReleaseSteps:
                                         release_speed_m_s=float(np.linalg.norm(v))))
             self.pending_offset = (len(self.cans) - 1, t + ramp)
             self.removed.append(self.can_id)
+            if self.s.track_feedback:  # the fingers let the can go once open wider than it
+                free = min(1.0, 2 * self.spec.can.radius_m / self.open_w)
+                self.releasing = (t + ramp, t + ramp + cfg.open_s, t + ramp + free * cfg.open_s)
             self._return_on_the_move(t, track.sample(track.duration_s))
             return True
         st.append_hold("open", self.can_id, cfg.open_s, width_from_m=0.0, width_to_m=self.open_w, carrying=False)
@@ -121,6 +134,52 @@ class ReleaseSteps:
         self.mode = "released"
         self.released_t = st.duration_s
         return True
+
+    def _track_update(self, t: float) -> None:
+        """Re-aim the release at a new estimate (module docstring); past the moment the fingers
+        let the can go, nothing more to do."""
+        from suite.execution.track import tracking_motion
+
+        t_open, t_end, t_free = self.releasing
+        t_s = t + TRACK_UPDATE_S
+        if t_s >= t_free:
+            self.releasing = None
+            return
+        st = self.stream
+        q_s, qd_s, _ = st.state(t_s)
+        gripper = self.robot.gripper_pose(q_s[None, :])[0][:2, 3]
+        fix = (self.estimator.predict(t, t_s) - gripper) / max(t_free - t_s, 0.1)
+        norm = float(np.linalg.norm(fix))
+        if norm > TRACK_CORRECTION_M_S:
+            fix *= TRACK_CORRECTION_M_S / norm
+        v = self.estimator.velocity(t) + fix
+        a_lim = self.robot.acceleration_limits_rad_s2
+        track = None
+        for k in (1.0, 2.0):
+            ramp = min(k * self.s.track_ramp_s, t_free - t_s)
+            cand = tracking_motion(self.spec.robot, q_s, v, ramp_s=ramp, duration_s=t_end - t_s, qd0=qd_s)
+            if cand is not None and np.all(np.abs(cand.sample(np.linspace(0, cand.duration_s, 100))[2]) <= a_lim):
+                track = cand
+                break
+        if track is None:
+            self.events.append(ReplanEvent(t, self.can_id, "track", None, 0.0, None, "failed",
+                                           "no re-aimed tracking motion within the limits", "track"))
+            return
+        seg = st.at(t_s)
+        width, opening = seg.width(t_s)[0], seg.phase == "open"
+        st.cut(t_s, can_id=self.can_id, width_m=width, carrying=not opening)
+        if opening:  # the cut piece opens the fingers up to where they are at t_s
+            st.segments[-1] = dataclasses.replace(st.segments[-1], width_to_m=width)
+            st.append_motion("open", self.can_id, Window(track, 0.0, t_end - t_s), width_m=0.0, carrying=False)
+        else:
+            st.append_motion("track", self.can_id, Window(track, 0.0, t_open - t_s), width_m=0.0, carrying=True)
+            st.append_motion("open", self.can_id, Window(track, t_open - t_s, t_end - t_open), width_m=0.0,
+                             carrying=False)
+        last = st.segments[-1]
+        st.segments[-1] = dataclasses.replace(last, width_from_m=width if opening else 0.0, width_to_m=self.open_w)
+        self.events.append(ReplanEvent(t, self.can_id, "track", None, 0.0, None, "spliced", "", "",
+                                       splice_speed_rad_s=float(np.max(np.abs(qd_s)))))
+        self._return_on_the_move(t, track.sample(track.duration_s))
 
     def _tracking(self, q0: np.ndarray, v: np.ndarray, open_s: float):
         """The release's tracking motion at the bin's velocity v, within the joint acceleration

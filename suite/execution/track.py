@@ -125,11 +125,12 @@ def gripper_velocity_xy(robot_name: str, q, qd) -> np.ndarray:
 
 
 def tracking_motion(robot_name: str, q0: np.ndarray, v_xy_m_s: np.ndarray, *, ramp_s: float, duration_s: float,
-                    dt_s: float = 0.01) -> TrackTrajectory | None:
+                    dt_s: float = 0.01, qd0: np.ndarray | None = None) -> TrackTrajectory | None:
     """The arm's motion from rest at q0 that brings the gripper to the planar velocity v_xy_m_s
     (2,) over ramp_s and keeps it until duration_s (s), its height and orientation held (see the
     module docstring); the grid step is at most dt_s. A (3,) velocity also moves the gripper up or
-    down (an escape from the person).
+    down (an escape from the person). From a moving start (joint velocities qd0), the gripper's
+    velocity ramps from its velocity there to v_xy_m_s (a release re-aimed at a new estimate).
 
     Returns None when differential IK finds no solution at some step or the final gripper pose is
     off the ideal one by more than POSITION_TOLERANCE_M or ORIENTATION_TOLERANCE_RAD (a velocity
@@ -165,17 +166,24 @@ def tracking_motion(robot_name: str, q0: np.ndarray, v_xy_m_s: np.ndarray, *, ra
 
     X0 = pose(q0)
     p0, R0 = X0.translation(), X0.rotation()
+    qd_start = np.zeros(7) if qd0 is None else np.asarray(qd0, float)
+    v0 = np.zeros(3)
+    if np.any(qd_start):
+        from pydrake.multibody.tree import JacobianWrtVariable
+
+        W = plant.world_frame()
+        v0 = plant.CalcJacobianTranslationalVelocity(ctx, JacobianWrtVariable.kV, G, np.zeros(3), W, W) @ qd_start
 
     def error(q, t):
         """Position (3,) and rotation (3,) error of q from the desired pose at t, in the world."""
         X = pose(q)
         aa = R0.multiply(X.rotation().inverse()).ToAngleAxis()
-        return p0 + v * _ramp_integral(t, ramp_s) - X.translation(), aa.angle() * aa.axis()
+        return p0 + v0 * t + (v - v0) * _ramp_integral(t, ramp_s) - X.translation(), aa.angle() * aa.axis()
 
     def joint_velocity(q, t):
         e_p, e_r = error(q, t)
         u = min(t / ramp_s, 1.0)
-        V = np.concatenate([FEEDBACK_GAIN_PER_S * e_r, v * (3 * u**2 - 2 * u**3) + FEEDBACK_GAIN_PER_S * e_p])
+        V = np.concatenate([FEEDBACK_GAIN_PER_S * e_r, v0 + (v - v0) * (3 * u**2 - 2 * u**3) + FEEDBACK_GAIN_PER_S * e_p])
         if not np.any(V):
             return np.zeros(7)
         plant.SetPositions(ctx, q)
@@ -185,7 +193,7 @@ def tracking_motion(robot_name: str, q0: np.ndarray, v_xy_m_s: np.ndarray, *, ra
             return None
         return np.asarray(res.joint_velocities, float)
 
-    q, qd = [q0.copy()], [np.zeros(7)]  # at rest: the desired velocity and the error are 0 at t = 0
+    q, qd = [q0.copy()], [qd_start.copy()]  # the desired velocity at t = 0 is the start's, the error 0
     for k in range(n):
         h = t_grid[k + 1] - t_grid[k]
         qd_pred = joint_velocity(q[k] + h * qd[k], t_grid[k + 1])

@@ -124,3 +124,21 @@ def test_the_pose_feedback_keeps_a_long_follow_on_course(drop):
     X0, X1 = robot.gripper_pose(np.stack([q0, tr.q[-1]]))
     assert np.linalg.norm(X1[:3, 3] - X0[:3, 3] - np.append(v * (2.0 - RAMP_S / 2), 0.0)) < 1e-3
     assert _rotation_angle(X1[:3, :3] @ X0[:3, :3].T) < 1e-3
+
+
+def test_a_release_re_aimed_from_a_moving_start_joins_it_and_reaches_the_new_velocity(drop):
+    """Re-aimed at a new estimate mid-release: the motion starts in the commanded state (q, qd) of
+    the one it replaces and carries the gripper at the new velocity once its ramp is over."""
+    name, q0 = drop
+    first = track.tracking_motion(name, q0, V_XY, ramp_s=RAMP_S, duration_s=DURATION_S)
+    t_s = RAMP_S / 2
+    q_s, qd_s, _ = first.sample(t_s)
+    v_new = np.array([0.1, -0.15])
+    again = track.tracking_motion(name, q_s, v_new, ramp_s=RAMP_S, duration_s=DURATION_S - t_s, qd0=qd_s)
+    assert again is not None
+    q, qd, _ = again.sample(0.0)
+    assert np.allclose(q, q_s) and np.allclose(qd, qd_s)
+    v_end = track.gripper_velocity_xy(name, again.q[-1], again.qd[-1])
+    assert np.linalg.norm(v_end - v_new) < 0.01, v_end
+    v_start = track.gripper_velocity_xy(name, q_s, qd_s)
+    assert np.linalg.norm(v_start - v_new) > 0.05  # a real change of course
