@@ -15,11 +15,13 @@ A mixin of `suite.execution.moving_bin_episode.Episode` over the geometry and fo
   uncertainty of `SsmSettings.for_scenario`. Nearer: a protective stop;
   the arm replans from rest once the person is clear by `resume_hysteresis_m`;
 - `_escape`: when the person has walked to within `person_margin_m` of the arm standing still
-  (waiting for a plan, after a protective stop, or holding over the bin), the gripper backs away
+  (waiting for a plan, after a protective stop, or holding over the bin), or the bin has walked
+  into its place in the world of the moment, the gripper backs away
   from them, horizontally at `ESCAPE_SPEED_M_S` and up at `ESCAPE_RISE_M_S`, by differential IK
   (`suite.execution.track.tracking_motion`), then stops; the motion is validated in the world of
-  the moment without the person (`suite.execution.replan.static_reason`: it starts inside their
-  margin and leads away), straight away first, then 45 degrees to either side. The loop then
+  the moment without the person (`suite.execution.replan.escape_reason`: it starts inside a
+  margin and leads out, so it must be free from its first free sample on), straight away first,
+  then 45 degrees to either side. The loop then
   plans again from there. Not checked against the person's predicted path: it moves away from
   where they are, not from where they will be;
 - `_watch_person`: the true distance (measured joints, the person's true place) every 10 ms:
@@ -31,9 +33,9 @@ from __future__ import annotations
 import numpy as np
 
 #: The escape: the gripper's horizontal speed away from the person and its rise (m/s), the ramp
-#: to that speed and the whole motion before the stop (s): about 9 cm away and 3 cm up.
+#: to that speed and the whole motion before the stop (s): about 9 cm away and 6 cm up.
 ESCAPE_SPEED_M_S = 0.25
-ESCAPE_RISE_M_S = 0.08
+ESCAPE_RISE_M_S = 0.15
 ESCAPE_RAMP_S = 0.15
 ESCAPE_S = 0.45
 #: Escapes a can may make; past them the loop waits as before (its time limits still hold).
@@ -124,13 +126,20 @@ class PersonGuard:
         self.stream.append_hold("wait", self.can_id, self.period, width_from_m=width, carrying=self.carrying(t))
 
     def _crowded(self, t: float) -> bool:
-        """Has the person (by the estimate) come within the person margin of the arm at rest?"""
-        return self.s.person_margin_m > 0 and self._separation(t, self.stream.q_end) < self.s.person_margin_m
+        """Has the person (by the estimate) come within the person margin of the arm at rest, or
+        the arm's place collided in the world of the moment (the bin walked into it)?"""
+        from suite.execution.replan import start_free
+
+        q = self.stream.q_end
+        if self.s.person_margin_m > 0 and self._separation(t, q) < self.s.person_margin_m:
+            return True
+        template = self.transit_template if self.carrying(t) else self.return_template
+        return not start_free(template, self.s, self.estimator.predict(t, t), q)
 
     def _escape(self, t: float) -> bool:
         """Back the gripper away from the person who walked into the standing arm (module
         docstring), from rest at the stream's end; False if no escape is valid (or none is left)."""
-        from suite.execution.replan import static_reason
+        from suite.execution.replan import escape_reason
         from suite.execution.splice import stopping_blend
         from suite.execution.track import tracking_motion
 
@@ -158,7 +167,7 @@ class PersonGuard:
                 continue
             dense = np.concatenate([track.sample(np.linspace(0.0, track.duration_s, 24))[0],
                                     stop.sample(np.linspace(0.0, stop.duration_s, 12))[0]])
-            if static_reason(template, self.s, self.estimator.predict(t, t), dense) is not None:
+            if escape_reason(template, self.s, self.estimator.predict(t, t), dense) is not None:
                 continue
             self.escapes += 1
             width = st.at(t).width(t)[0]

@@ -108,9 +108,11 @@ class ReleaseSteps:
         st, cfg = self.stream, self.job.config
         if self.s.release == "moving":
             track, ramp = self._tracking(st.q_end, v, cfg.open_s)
-            if track is None:
-                self.events.append(ReplanEvent(t, self.can_id, "release", None, 0.0, None, "track failed",
-                                               "no tracking motion at the bin's velocity within the limits", "track"))
+            why = "no tracking motion at the bin's velocity within the limits" if track is None \
+                else self._track_reason(t, track, ramp)
+            if why is not None:
+                self.events.append(ReplanEvent(t, self.can_id, "release", None, 0.0, None, "track failed", why,
+                                               "track"))
                 return False
             st.append_motion("track", self.can_id, Window(track, 0.0, ramp), width_m=0.0, carrying=True)
             st.append_motion("open", self.can_id, Window(track, ramp, cfg.open_s), width_m=0.0, carrying=False)
@@ -134,6 +136,25 @@ class ReleaseSteps:
         self.mode = "released"
         self.released_t = st.duration_s
         return True
+
+    def _track_reason(self, t: float, track, t_open_s: float) -> str | None:
+        """Why the tracking motion `track` may not run (None: it may): validated like any motion,
+        in the world of the moment without the person, the can held until the opening starts
+        (t_open_s into the motion) and the fingers open after it. Differential IK knows no
+        obstacle and no self-collision (a release near the robot's base folds the elbow)."""
+        from suite.execution.replan import escape_reason
+
+        bin_xy = self.estimator.predict(t, t)
+        n = max(2, int(np.ceil(track.duration_s / 0.02)) + 1)
+        ts = np.linspace(0.0, track.duration_s, n)
+        q = track.sample(ts)[0]
+        held, opening = q[ts <= t_open_s + 1e-9], q[ts >= t_open_s - 1e-9]
+        for template, part in ((self.transit_template, held), (self.return_template, opening)):
+            if len(part) >= 2:
+                why = escape_reason(template, self.s, bin_xy, part, leading_collisions=False)
+                if why is not None:
+                    return why
+        return None
 
     def _track_update(self, t: float) -> None:
         """Re-aim the release at a new estimate (module docstring); past the moment the fingers
@@ -161,9 +182,10 @@ class ReleaseSteps:
             if cand is not None and np.all(np.abs(cand.sample(np.linspace(0, cand.duration_s, 100))[2]) <= a_lim):
                 track = cand
                 break
-        if track is None:
-            self.events.append(ReplanEvent(t, self.can_id, "track", None, 0.0, None, "failed",
-                                           "no re-aimed tracking motion within the limits", "track"))
+        why = "no re-aimed tracking motion within the limits" if track is None \
+            else self._track_reason(t, track, max(t_open - t_s, 0.0))
+        if why is not None:
+            self.events.append(ReplanEvent(t, self.can_id, "track", None, 0.0, None, "failed", why, "track"))
             return
         seg = st.at(t_s)
         width, opening = seg.width(t_s)[0], seg.phase == "open"

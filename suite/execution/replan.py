@@ -4,10 +4,13 @@
 the motion to splice in there, or why there is none (its `stage`):
 
 1. the world of the moment: the station with the bin (and the person beside it) where it is
-   predicted to be (`scenes.moving_bin.spec_with_bin_at`);
+   predicted to be (`scenes.moving_bin.spec_with_bin_at`); a start in collision there ("start":
+   the person or the bin walked into the arm) is the loop's failure, not the planner's;
 2. the goal ("goal_ik"): Drake's collision-aware IK of the drop pose over the predicted bin, its
    yaw free (a can drops the same whichever way the gripper turns), seeded at the previous goal
-   (`scenes.ik.PoseIk`), or a given configuration (a return's, a put-down's);
+   (`scenes.ik.PoseIk`), or a given configuration (a return's, a put-down's). The goal pose the
+   planner is given is the gripper's pose at that solution (its yaw as solved): `ik`'s nominal
+   waypoints end there, and must end within its goal tolerance of the configuration;
 3. the planner ("planner") from q_s to the goal, with the budget left and a warm start: the path
    being executed;
 4. the join ("join"): the path bent onto the arriving motion without stopping
@@ -47,7 +50,7 @@ ONLINE_IK_ITERATIONS = 60
 POST_PLAN_RESERVE_S = 0.06
 
 #: The stages of an online plan, in order (a failure names its stage).
-STAGES = ("budget", "goal_ik", "planner", "join", "validator", "person")
+STAGES = ("budget", "start", "goal_ik", "planner", "join", "validator", "person")
 
 #: The paper's transit lasts 12 time units (`suite.problems.cycle.SCHEDULE`): the nominal
 #: waypoints of a replanned motion get times in proportion to their gripper distances at that rate.
@@ -97,10 +100,23 @@ def _waypoints(robot, q_b: np.ndarray, poses: list[np.ndarray], t0: float) -> tu
     return tuple(out)
 
 
-def static_reason(template: PlanningProblem, scenario: MovingBinScenario, bin_xy_m, polyline: np.ndarray) -> str | None:
-    """The validator's verdict on a motion (its dense polyline) in the world of the moment without
-    the person: the station with the bin at bin_xy_m. For an escape, which starts where the person
-    has walked into the arm and leads away from them."""
+def start_free(template: PlanningProblem, scenario: MovingBinScenario, bin_xy_m, q: np.ndarray) -> bool:
+    """Is q free in the world of the moment (the bin and the person where bin_xy_m puts them)?"""
+    from planners.worlds import collision_world
+
+    spec = template.scene.spec
+    scene = Scene(spec_with_bin_at(scenario, spec, bin_xy_m), template.scene.seed, template.scene.cans)
+    return collision_world(template.with_(scene=scene)).is_free(np.asarray(q, float))
+
+
+def escape_reason(template: PlanningProblem, scenario: MovingBinScenario, bin_xy_m, polyline: np.ndarray, *,
+                  leading_collisions: bool = True) -> str | None:
+    """The validator's verdict on a motion the loop makes itself (an escape, a release's tracking;
+    its dense polyline) in the world of the moment without the person (the station with the bin at
+    bin_xy_m; the person is the swept check's and the monitor's). An escape starts where the person
+    or the bin has come into the arm's margins and leads out, so with `leading_collisions` its
+    first samples may collide: from its first free sample on it must be free, and it must reach
+    one; without, every sample must be free."""
     from planners.worlds import collision_world
     from suite.scoring.validate import validate_path
 
@@ -109,7 +125,15 @@ def static_reason(template: PlanningProblem, scenario: MovingBinScenario, bin_xy
     scene = Scene(dataclasses.replace(spec, bin=b), template.scene.seed, template.scene.cans)
     polyline = np.asarray(polyline, float)
     problem = template.with_(scene=scene, q_start=polyline[0], q_goal=polyline[-1])
-    return validate_path(problem, polyline, collision_world(problem))
+    world = collision_world(problem)
+    if not leading_collisions:
+        return validate_path(problem, polyline, world)
+    free = world.states_free(polyline)
+    if not free.any():
+        return "no sample of the escape is free"
+    first = int(np.argmax(free))
+    rest = polyline[first:]
+    return validate_path(problem.with_(q_start=rest[0]), rest, world)
 
 
 def plan_online(
@@ -176,7 +200,10 @@ def plan_online(
     scene = Scene(spec_with_bin_at(scenario, spec, bin_xy_m), template.scene.seed, template.scene.cans)
     problem = template.with_(scene=scene)
     q_s = np.asarray(q_s, float)
+    world = collision_world(problem)
     lap("world")
+    if not world.is_free(q_s):
+        return done(False, "start", "the start is in collision in the world of the moment")
     X_goal = template.X_WG_goal
     if q_goal is None:
         # the aim stays over the bin's region: the bin never leaves it (and the arm's reach is
@@ -191,6 +218,7 @@ def plan_online(
         lap("ik")
         if q_goal is None:
             return done(False, "goal_ik", f"goal IK failed (drop over {aim[0]:.3f}, {aim[1]:.3f} m)")
+        X_goal = robot.gripper_pose(np.asarray(q_goal, float)[None, :])[0]  # the yaw as solved
     left = budget_s - (time.perf_counter() - t0) - POST_PLAN_RESERVE_S
     if left <= 0:
         return done(False, "budget", "budget spent before planning", q_goal=q_goal)
@@ -211,7 +239,6 @@ def plan_online(
     if join is None:
         return done(False, "join", "no join of the path onto the motion within the limits", q_goal=q_goal,
                     planner_status=status)
-    world = collision_world(problem)
     reason = validate_path(problem, join.polyline, world)
     lap("validate")
     if reason is not None:

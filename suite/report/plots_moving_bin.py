@@ -24,9 +24,9 @@ def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: P
     cans in the bin per can attempted (95% Wilson intervals); the paired differences between
     planners (mean over shared episodes, 95% bootstrap interval; filled where it excludes 0);
     replan latency (median, p95 dashed, the deadline dotted); deadline misses and failed replans per
-    can; cans lost per can attempted (given up, or released and missed the bin); contacts with the
+    can; cans lost per can offered (given up; or not in the bin otherwise: missed, flung, not reached); contacts with the
     bin or the person and near misses per episode."""
-    cells = [c for c in speed_cells(records, planners=planners) if c.cans_attempted]
+    cells = [c for c in speed_cells(records, planners=planners) if c.cans_offered]
     if not cells:
         return None
     shown = list(dict.fromkeys(c.planner for c in cells))
@@ -56,7 +56,7 @@ def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: P
         p95 = [np.quantile(c.latencies_s, 0.95) if c.latencies_s else math.nan for c in mine]
         a_lat.plot(x, med, color=col, marker=marker, lw=1.8)
         a_lat.plot(x, p95, color=col, marker=marker, lw=1.0, ls="--", mfc="none")
-        per_can = [c.cans_attempted for c in mine]
+        per_can = [max(c.cans_offered, 1) for c in mine]
         a_miss.plot(x, [c.deadline_misses / k for c, k in zip(mine, per_can)], color=col, marker=marker, lw=1.8)
         a_miss.plot(x, [c.replan_failures / k for c, k in zip(mine, per_can)], color=col, marker=marker, lw=1.0,
                     ls=":", mfc="none")
@@ -72,7 +72,7 @@ def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: P
                        marker=marker, lw=1.0, ls="--", mfc="none")
     _paired_panel(a_pair, records, planners=planners, at=at)
     a_bin.set_ylim(-3, 105)
-    a_bin.set_ylabel("cans in the bin per can attempted (%)")
+    a_bin.set_ylabel("cans in the bin per can offered (%)")
     a_bin.set_title("Cans in the bin (95% Wilson intervals)", fontsize=10)
     if deadline is not None:
         a_lat.axhline(deadline, color="black", ls=":", lw=1.2)
@@ -85,7 +85,7 @@ def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: P
     a_miss.set_title("Replans: deadline missed (solid), failed (dotted)", fontsize=10)
     a_lost.set_ylim(-3, 105)
     a_lost.set_ylabel("cans per can attempted (%)")
-    a_lost.set_title("Cans lost: missed the bin (solid), given up (dashed)", fontsize=10)
+    a_lost.set_title("Cans lost: not in the bin otherwise (solid), given up (dashed)", fontsize=10)
     a_hit.set_ylabel("per episode")
     near = any(c.near_misses_person is not None for c in cells)
     a_hit.set_title("Contacts with the bin or person (solid)" + (", person near misses (dashed)" if near else ""),

@@ -66,7 +66,7 @@ PAIRED_CAPTION = (
     "with that in mind.")
 
 #: The failure stages in the order of a replan, and their short names in a table cell.
-STAGES = ("goal_ik", "join", "planner", "validator", "person", "timing", "budget")
+STAGES = ("start", "goal_ik", "join", "planner", "validator", "person", "timing", "budget")
 STAGE_SHORT = {"goal_ik": "ik"}
 #: A replan's steps in order (old records have "blend", new ones "join" and "person").
 STEPS = ("world", "blend", "ik", "plan", "join", "validate", "person", "timing")
@@ -140,11 +140,15 @@ class SpeedCell:
     near_misses_person: int | None = None
     ssm_holds: int | None = None
     person_min_distance_m: float | None = None
+    escapes: int | None = None
+    release_updates: int | None = None
+    cans_offered: int = 0
 
     @property
     def rate(self) -> float:
-        """Cans in the bin per can attempted."""
-        return self.cans_in_bin / self.cans_attempted if self.cans_attempted else math.nan
+        """Cans in the bin per can offered (every can of the episodes that ran or failed: a can
+        an episode never reached, or one that ended in an error, counts as not delivered)."""
+        return self.cans_in_bin / self.cans_offered if self.cans_offered else math.nan
 
     @property
     def replans_per_can(self) -> float:
@@ -163,11 +167,14 @@ def _stages(rs: Sequence[dict[str, Any]]) -> dict[str, int] | None:
 
 
 def _splice_speeds(rs: Sequence[dict[str, Any]]) -> tuple[float, ...]:
-    """The joint speed at every splice (the events'); for a record whose events lack it, its median."""
+    """The joint speed at every drift replan's splice (the events': the replans made while the arm
+    moves; those after an arrival or a protective stop start from rest); for a record whose events
+    lack it, its median over every splice."""
     out: list[float] = []
     for r in rs:
         per_event = [e["splice_speed_rad_s"] for e in r.get("events", ())
-                     if e.get("outcome") == "spliced" and e.get("splice_speed_rad_s") is not None]
+                     if e.get("outcome") == "spliced" and e.get("trigger") == "drift"
+                     and e.get("splice_speed_rad_s") is not None]
         if per_event:
             out += per_event
         elif r.get("splice_speed_median_rad_s") is not None:
@@ -187,11 +194,12 @@ def speed_cells(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | 
             ok = [r for r in rs if r.get("status") == "ok"]
             na = next((r["reason"] for r in rs if r.get("status") == "not_applicable"), "")
             k, attempted = sum(r["cans_in_bin"] for r in ok), sum(r["cans_attempted"] for r in ok)
+            offered = sum(r["cans_total"] for r in rs if r.get("status") in ("ok", "error"))
             events = [e for r in ok for e in r.get("events", ()) if _deadline_bound(e)]
             spliced = [e for e in events if e["outcome"] == "spliced"]
             out.append(SpeedCell(
                 planner=p, speed_m_s=v, episodes=len(rs), cans_in_bin=k, cans_total=sum(r["cans_total"] for r in ok),
-                ci95=wilson_interval(k, attempted),
+                ci95=wilson_interval(k, offered), cans_offered=offered,
                 replans=sum(r["replans"] for r in ok), cans_attempted=attempted,
                 deadline_misses=sum(r["deadline_misses"] for r in ok),
                 replan_failures=sum(r["replan_failures"] for r in ok),
@@ -220,7 +228,8 @@ def speed_cells(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | 
                 near_misses_person=_total(ok, "near_misses_person"),
                 ssm_holds=_total(ok, "ssm_holds"),
                 person_min_distance_m=min((r["person_min_distance_m"] for r in ok
-                                           if r.get("person_min_distance_m") is not None), default=None)))
+                                           if r.get("person_min_distance_m") is not None), default=None),
+                escapes=_total(ok, "escapes"), release_updates=_total(ok, "release_updates")))
     return out
 
 
@@ -243,10 +252,10 @@ def _or_dash(v: Any) -> str:
 
 def _fraction_cell(c: SpeedCell) -> str:
     """"9/10 (90% [60, 98])": cans in the bin of those attempted, the rate and its Wilson interval."""
-    if not c.cans_attempted:
+    if not c.cans_offered:
         return "-"
     lo, hi = c.ci95
-    return f"{c.cans_in_bin}/{c.cans_attempted} ({100 * c.rate:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}])"
+    return f"{c.cans_in_bin}/{c.cans_offered} ({100 * c.rate:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}])"
 
 
 def moving_bin_rows(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
@@ -268,6 +277,7 @@ def moving_bin_rows(records: Sequence[dict[str, Any]], *, planners: Sequence[str
     show_splice_speed = any(c.splice_speeds_rad_s for c in ran)
     show_moving = shown("releases_moving")
     show_person = shown("near_misses_person") or shown("ssm_holds")
+    show_escapes, show_updates = shown("escapes"), shown("release_updates")
     columns: list[tuple[str, Any]] = [
         ("planner", lambda c: c.planner),
         ("speed (m/s)", lambda c: format_number(c.speed_m_s)),
@@ -278,7 +288,7 @@ def moving_bin_rows(records: Sequence[dict[str, Any]], *, planners: Sequence[str
         columns.append(("release", lambda c: c.release_mode))
     columns += [
         ("episodes", lambda c: f"{c.episodes} ({c.errors} error{'s' * (c.errors != 1)})" if c.errors else c.episodes),
-        ("cans in bin / attempted", _fraction_cell),
+        ("cans in bin / offered", _fraction_cell),
     ]
     if show_not_attempted:
         columns.append(("not attempted", lambda c: c.not_attempted))
@@ -299,14 +309,18 @@ def moving_bin_rows(records: Sequence[dict[str, Any]], *, planners: Sequence[str
     else:
         columns.append(("splices", lambda c: c.splices))
     if show_splice_speed:
-        columns.append(("splice speed (rad/s)", lambda c: format_number(_q(c.splice_speeds_rad_s, 0.5))
+        columns.append(("drift splice speed (rad/s)", lambda c: format_number(_q(c.splice_speeds_rad_s, 0.5))
                         if c.splice_speeds_rad_s else "-"))
     if show_moving:
         columns.append(("released moving / released", lambda c: f"{_or_dash(c.releases_moving)} / {c.cans_released}"))
+    if show_updates:
+        columns.append(("release updates", lambda c: _or_dash(c.release_updates)))
     columns.append(("contacts bin / person", lambda c: f"{c.contacts_bin} / {c.contacts_person}"))
     if show_person:
         columns.append(("person near misses / SSM holds",
                         lambda c: f"{_or_dash(c.near_misses_person)} / {_or_dash(c.ssm_holds)}"))
+    if show_escapes:
+        columns.append(("escapes", lambda c: _or_dash(c.escapes)))
     columns += [
         ("jump (rad, rad/s)", lambda c: f"{format_number(c.jump_q_rad)}, {format_number(c.jump_v_rad_s)}"
          if math.isfinite(c.jump_q_rad) else "-"),
@@ -334,9 +348,9 @@ def episode_key(r: dict[str, Any]) -> tuple:
 
 @dataclasses.dataclass(frozen=True)
 class PairedDifference:
-    """Planner A minus planner B in cans in the bin per can attempted, over the episodes both ran.
+    """Planner A minus planner B in cans in the bin per can offered, over the episodes both ran.
 
-    speed_m_s, latency_mode, release_mode are None on the row pooling them all. mean_pp and ci_pp
+    speed_m_s, latency_mode, release_mode are None on the row pooling every speed above 0. mean_pp and ci_pp
     (percentage points) are None with fewer than 2 episodes."""
 
     planner_a: str
@@ -385,13 +399,14 @@ def bootstrap_mean_ci(d: np.ndarray, *, clusters: Sequence | None = None, n_resa
 
 
 def _episode_rates(records: Sequence[dict[str, Any]], planner: str) -> dict[tuple, float]:
-    """Cans in the bin per can attempted per episode key (ok episodes with a can attempted; a key
-    met twice takes the mean)."""
+    """Cans in the bin per can offered per episode key (episodes that ran or ended in an error,
+    which delivers none of the cans it did not finish; a key met twice takes the mean)."""
     by_key: dict[tuple, list[float]] = {}
     for r in records:
-        if r["planner"] == planner and r.get("status") == "ok" and r.get("cans_attempted") \
+        if r["planner"] == planner and r.get("status") in ("ok", "error") and r.get("cans_total") \
                 and r.get("speed_m_s") is not None:
-            by_key.setdefault(episode_key(r), []).append(r["cans_in_bin"] / r["cans_attempted"])
+            delivered = r.get("cans_in_bin", 0) if r.get("status") == "ok" else 0
+            by_key.setdefault(episode_key(r), []).append(delivered / r["cans_total"])
     return {k: float(np.mean(v)) for k, v in by_key.items()}
 
 
@@ -420,8 +435,9 @@ def paired_differences(records: Sequence[dict[str, Any]], *, planners: Sequence[
         groups = sorted({(k[4], k[5], k[6]) for k in shared})
         for g in groups:
             out.append(_difference(a, b, [k for k in shared if (k[4], k[5], k[6]) == g], rates[a], rates[b], g))
-        if len(groups) > 1:
-            out.append(_difference(a, b, shared, rates[a], rates[b], (None, None, None)))
+        moving = [k for k in shared if k[4] > 0]  # a still bin asks for no replanning: not pooled
+        if len({(k[4], k[5], k[6]) for k in moving}) > 1:
+            out.append(_difference(a, b, moving, rates[a], rates[b], (None, None, None)))
     return out
 
 

@@ -145,22 +145,23 @@ def test_moving_bin_cells_count_cans_latency_and_misses(tmp_path):
     assert fast.ci95[0] < 0.5 < fast.ci95[1]
     headers, rows = moving_bin_rows(records)
     gcs = [r for r in rows if r[0] == "gcs"]
-    assert headers[3] == "cans in bin / attempted"
+    assert headers[3] == "cans in bin / offered"
     assert len(gcs) == 2 and gcs[0][3].startswith("not applicable: its convex regions")
     assert all(len(r) == len(headers) for r in rows)
     rrt_fast = next(r for r in rows if r[:2] == ["rrt", "0.2"])
     assert rrt_fast[headers.index("missed / failed")] == "1 / 0"
 
 
-def test_the_headline_is_per_can_attempted_and_old_records_render_without_the_new_columns():
+def test_the_headline_is_per_can_offered_and_old_records_render_without_the_new_columns():
     old = _old(_records())
     old[2] = {**old[2], "cans_total": 4, "cans_attempted": 2, "cans_given_up": 1}  # rrt at 0.2: 2 cans never tried
     headers, rows = moving_bin_rows(old)
     row = next(r for r in rows if r[:2] == ["rrt", "0.2"])
-    assert row[headers.index("cans in bin / attempted")] == "1/2 (50% [9, 91])"  # Wilson of 1/2, not of 1/4
+    assert row[headers.index("cans in bin / offered")] == "1/4 (25% [5, 70])"  # the cans never tried count
     assert row[headers.index("not attempted")] == 2
     assert row[headers.index("given up")] == 1
-    for absent in ("given up (put down)", "failed by stage", "splices (at rest)", "splice speed (rad/s)",
+    for absent in ("given up (put down)", "failed by stage", "splices (at rest)", "drift splice speed (rad/s)",
+                   "escapes", "release updates",
                    "released moving / released", "person near misses / SSM holds", "latency", "release"):
         assert absent not in headers
     text = moving_bin_table(old, planners=("rrt", "gcs"))
@@ -181,12 +182,12 @@ def test_the_main_table_shows_the_loop_on_the_move():
     headers, rows = moving_bin_rows(records)
     (row,) = rows
     cell = dict(zip(headers, row))
-    assert cell["cans in bin / attempted"].startswith("5/6 (83% [")
+    assert cell["cans in bin / offered"].startswith("5/6 (83% [")
     assert cell["given up (put down)"] == "1 (1)"
     assert cell["missed / failed"] == "1 / 1"
     assert cell["failed by stage"] == "ik 3, join 1, planner 2"
     assert cell["splices (at rest)"] == "3 (1)"
-    assert cell["splice speed (rad/s)"] == "0.8"  # the median of the splices' 0.4, 0.8, 1.0 (events, not records)
+    assert cell["drift splice speed (rad/s)"] == "0.8"  # the median of the splices' 0.4, 0.8, 1.0 (events)
     assert cell["released moving / released"] == "5 / 5"
     assert cell["contacts bin / person"] == "0 / 1"
     assert cell["person near misses / SSM holds"] == "2 / 1"
@@ -213,7 +214,7 @@ def _paired_records():
         _record("ik", bin_seed=7, in_bin=0, attempted=5),
         _record("rrt", bin_seed=7, in_bin=0, attempted=0),  # no can attempted: no rate
         _record("ik", bin_seed=8, in_bin=0, attempted=5),
-        _record("rrt", bin_seed=8, in_bin=5, attempted=5, status="error"),
+        _record("rrt", bin_seed=8, in_bin=5, attempted=5, status="error"),  # an error delivers none: 0 of 5
         _record("ik", bin_seed=0, in_bin=0, attempted=5, path_index=1),  # another path of the same seed
         _record("ik", bin_seed=0, in_bin=0, attempted=5, scene_seed=1012),  # another scene
         _record("ik", bin_seed=0, in_bin=0, attempted=5, release_mode="rest"),  # another release mode
@@ -231,27 +232,32 @@ def test_paired_differences_pair_episodes_by_their_bin_path(monkeypatch):
     records = _paired_records()
     diffs = paired_differences(records, planners=("ik", "rrt"))
     at_02 = next(d for d in diffs if d.speed_m_s == 0.2)
-    d = np.array([0.6 - 0.4, 0.8 - 0.4, 0.4 - 0.2, 1.0 - 0.6, 1.0 - 0.75])  # by hand: 1.45 / 5 = 0.29
-    assert (at_02.planner_a, at_02.planner_b, at_02.n) == ("ik", "rrt", 5)
-    assert math.isclose(at_02.mean_pp, 29.0)
+    # by hand, seeds 0-4 then 8 (ik 0 of 5, rrt's error 0 of 5): 1.45 / 6
+    d = np.array([0.6 - 0.4, 0.8 - 0.4, 0.4 - 0.2, 1.0 - 0.6, 1.0 - 0.75, 0.0])
+    assert (at_02.planner_a, at_02.planner_b, at_02.n) == ("ik", "rrt", 6)
+    assert math.isclose(at_02.mean_pp, 100 * 1.45 / 6)
     lo, hi = at_02.ci_pp
-    assert 20.0 <= lo < 29.0 < hi <= 40.0  # within the smallest and largest d
+    assert 0.0 <= lo < 100 * 1.45 / 6 < hi <= 40.0  # within the smallest and largest d
     assert at_02.established and (at_02.a_ahead, at_02.b_ahead) == (5, 0)
     assert (lo, hi) == tuple(100 * v for v in bootstrap_mean_ci(d))  # seeded: the same every time
     at_04 = next(d for d in diffs if d.speed_m_s == 0.4)
     assert at_04.n == 1 and at_04.ci_pp is None and at_04.established is None
     pooled = next(d for d in diffs if d.speed_m_s is None)
-    assert pooled.n == 6 and math.isclose(pooled.mean_pp, 100 * (d.sum() + 1.0) / 6)
+    assert pooled.n == 7 and math.isclose(pooled.mean_pp, 100 * (d.sum() + 1.0) / 7)
     # the other order of the planners flips the sign
     flipped = next(x for x in paired_differences(records, planners=("rrt", "ik")) if x.speed_m_s == 0.2)
-    assert flipped.planner_a == "rrt" and math.isclose(flipped.mean_pp, -29.0) and flipped.established
+    assert flipped.planner_a == "rrt" and math.isclose(flipped.mean_pp, -100 * 1.45 / 6) and flipped.established
     headers, rows = paired_rows(records, ("ik", "rrt"))
     assert headers[:3] == ["A - B", "speed (m/s)", "episodes paired"]
     cells = {r[1]: dict(zip(headers, r)) for r in rows}
-    assert cells["0.2"]["mean difference (pp)"] == "+29.0" and cells["0.2"]["established"] == "yes"
+    assert cells["0.2"]["mean difference (pp)"] == "+24.2" and cells["0.2"]["established"] == "yes"
     assert cells["0.4"]["episodes paired"] == "1 (1 scenes)" and cells["0.4"]["mean difference (pp)"] == "-"
     assert cells["0.4"]["established"] == "-"
-    assert cells["all"]["episodes paired"].startswith("6 (")
+    assert cells["all"]["episodes paired"].startswith("7 (")
+    # a still bin asks for no replanning: its episodes are not pooled
+    still = [_record(p, bin_seed=50, in_bin=k, attempted=5, speed=0.0) for p, k in (("ik", 5), ("rrt", 0))]
+    pooled = next(d for d in paired_differences([*records, *still], planners=("ik", "rrt")) if d.speed_m_s is None)
+    assert pooled.n == 7
 
 
 def test_the_interval_resamples_scenes_not_episodes():
@@ -270,7 +276,7 @@ def test_a_difference_over_too_few_episodes_is_never_established():
 
     records = _paired_records()
     at_02 = next(d for d in paired_differences(records, planners=("ik", "rrt")) if d.speed_m_s == 0.2)
-    assert at_02.n == 5 < smb.MIN_PAIRED and at_02.ci_pp[0] > 0 and at_02.established is None
+    assert at_02.n == 6 < smb.MIN_PAIRED and at_02.ci_pp[0] > 0 and at_02.established is None
     cells = {r[1]: r for r in paired_rows(records, ("ik", "rrt"))[1]}
     assert cells["0.2"][-1].startswith("too few")
 
