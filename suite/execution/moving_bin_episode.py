@@ -47,6 +47,7 @@ from suite.execution.moving_bin_records import (
     MovingBinRecord,
     ReplanEvent,
     episode_record,
+    error_state,
     modelled_latency,
 )
 from suite.execution.moving_bin_release import ReleaseSteps
@@ -438,19 +439,5 @@ class Episode(ReleaseSteps, PersonGuard):
         return episode_record(self, monitor, fates, wall)
 
     def error_state(self, t: float) -> dict:
-        """Where the simulation was when it failed: enough to replay the episode to that instant."""
-        st = self.stream
-        out: dict = {"sim_time_s": float(t), "mode": self.mode, "can_id": self.can_id}
-        try:
-            q, v, a = st.state(t)
-            out["command"] = {"q": q.tolist(), "v": v.tolist(), "a": a.tolist()}
-            out["segments"] = [(s.phase, round(s.t0_s, 4), round(s.duration_s, 4)) for s in st.segments[-6:]]
-            p, vb = self.path.at(t)
-            out["bin_drive"] = {"xy": np.asarray(p).tolist(), "v": np.asarray(vb).tolist()}
-            sim = self.sim
-            out["arm_q"] = sim.plant.GetPositions(sim.pc, sim.iiwa).tolist()
-            out["bin_q"] = sim.plant.GetPositions(sim.pc, sim.moving_bin).tolist()
-        except Exception as exc:  # the state of a broken simulation may itself be unreadable
-            out["unreadable"] = f"{type(exc).__name__}: {exc}"
-        out["events"] = [e.to_json() for e in self.events[-3:]]
-        return out
+        """Where the simulation was when it failed (`moving_bin_records.error_state`)."""
+        return error_state(self, t)

@@ -306,3 +306,22 @@ def episode_record(ep, monitor, fates, wall: float) -> MovingBinRecord:
         stopped=ep.stopped, cans=tuple(ep.cans), fates=tuple(f.to_json() for f in fates),
         events=tuple(ep.events[:MAX_EVENTS]), contact_events=tuple(e.to_json() for e in monitor.events),
     )
+
+
+def error_state(ep, t: float) -> dict:
+    """Where episode `ep`'s simulation was when it failed: enough to replay it to that instant."""
+    st = ep.stream
+    out: dict = {"sim_time_s": float(t), "mode": ep.mode, "can_id": ep.can_id}
+    try:
+        q, v, a = st.state(t)
+        out["command"] = {"q": q.tolist(), "v": v.tolist(), "a": a.tolist()}
+        out["segments"] = [(s.phase, round(s.t0_s, 4), round(s.duration_s, 4)) for s in st.segments[-6:]]
+        p, vb = ep.path.at(t)
+        out["bin_drive"] = {"xy": np.asarray(p).tolist(), "v": np.asarray(vb).tolist()}
+        sim = ep.sim
+        out["arm_q"] = sim.plant.GetPositions(sim.pc, sim.iiwa).tolist()
+        out["bin_q"] = sim.plant.GetPositions(sim.pc, sim.moving_bin).tolist()
+    except Exception as exc:  # the state of a broken simulation may itself be unreadable
+        out["unreadable"] = f"{type(exc).__name__}: {exc}"
+    out["events"] = [e.to_json() for e in ep.events[-3:]]
+    return out

@@ -12,11 +12,13 @@ Control (see `ExecutionConfig`):
 - WSG: each finger under the same kind of PD position controller, clamped to the gripper's force
   limit: closing on a can the fingers push with `grip_force_n` each (a position/force controller).
 
-Contact: Drake's discrete solver with the "lagged" convex approximation of SAP and point contact
-between the primitive shapes (boxes, cylinders, capsules). Convex SAP gives stable stacking and
-grasping at millisecond steps without the stiffness tuning TAMSI needs; point contact is enough
-for a parallel-jaw grasp across a rigid can's diameter and keeps the simulation faster than real
-time. See `ExecutionConfig` for the time step.
+Contact: Drake's discrete solver with the "lagged" convex approximation of SAP; by default
+(`ExecutionConfig.contact_model`, "hydroelastic_with_fallback") hydroelastic contact between the
+compliant finger pads and the rigid cans, point contact between the other primitive shapes (boxes,
+cylinders, capsules) (docs/execution.md: with point contact only, a grasped can pivots between
+the fingers); a room floor 0.75 m below the table catches a can that falls off it. Convex SAP
+gives stable stacking and grasping at millisecond steps without the stiffness tuning TAMSI needs.
+See `ExecutionConfig` for the time step.
 """
 
 from __future__ import annotations

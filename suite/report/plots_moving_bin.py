@@ -21,7 +21,7 @@ MODE_MARKERS = ("o", "s", "^", "D")
 
 def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path | None:
     """Six panels against bin speed (equally spaced categories), one line per planner (and mode):
-    cans in the bin per can attempted (95% Wilson intervals); the paired differences between
+    cans in the bin per can offered (95% Wilson intervals); the paired differences between
     planners (mean over shared episodes, 95% bootstrap interval; filled where it excludes 0);
     replan latency (median, p95 dashed, the deadline dotted); deadline misses and failed replans per
     can; cans lost per can offered (given up; or not in the bin otherwise: missed, flung, not reached); contacts with the
@@ -81,10 +81,10 @@ def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: P
     a_lat.set_ylim(0, max(a_lat.get_ylim()[1], 1.15 * (deadline or 0.0)))
     a_lat.set_ylabel("replan latency (s)")
     a_lat.set_title("Replan latency (solid: median, dashed: p95)", fontsize=10)
-    a_miss.set_ylabel("per can attempted")
+    a_miss.set_ylabel("per can offered")
     a_miss.set_title("Replans: deadline missed (solid), failed (dotted)", fontsize=10)
     a_lost.set_ylim(-3, 105)
-    a_lost.set_ylabel("cans per can attempted (%)")
+    a_lost.set_ylabel("cans per can offered (%)")
     a_lost.set_title("Cans lost: not in the bin otherwise (solid), given up (dashed)", fontsize=10)
     a_hit.set_ylabel("per episode")
     near = any(c.near_misses_person is not None for c in cells)
@@ -124,10 +124,10 @@ def _mode_label(mode: tuple[str, str], modes: Sequence[tuple[str, str]]) -> str:
 
 def _paired_panel(ax, records: Sequence[dict], *, planners: Sequence[str], at: dict[float, int]) -> None:
     """Mean paired difference (pp) per pair of planners against speed, its 95% bootstrap interval;
-    filled where the interval excludes 0; "all" pools every speed."""
+    filled where the interval excludes 0; "all" pools every speed above 0."""
     diffs = [d for d in paired_differences(records, planners=planners) if d.ci_pp is not None]
     ax.axhline(0, color="black", lw=1.0)
-    ax.set_ylabel("A - B, cans in the bin per can attempted (pp)")
+    ax.set_ylabel("A - B, cans in the bin per can offered (pp)")
     ax.set_title("Paired difference A - B over shared episodes\n(mean, 95% bootstrap; the number: episodes paired)",
                  fontsize=10)
     ticks = [f"{v:g}" for v in at]

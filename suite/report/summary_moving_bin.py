@@ -36,12 +36,15 @@ are compared episode by episode. Latency is measured (wall time on the run's mac
 (a declared constant per planner: the records are reproducible on any machine). Speed 0 is the
 static bin through the same loop.
 
-Cans in bin / attempted: with its 95% Wilson interval (not attempted: cans an older loop never
-tried after giving one up). Given up (put down): cans given up (of them put down on the plate).
+Cans in bin / offered: every can of the episodes that ran or crashed (a can never reached, or of
+a crashed episode, is not delivered), with its 95% Wilson interval (not attempted: cans an
+episode never reached: it stopped). Given up (put down): cans given up (of them put down on the plate).
 Released moving / released: releases on the move, of all releases. Replans: deadline-bound replans
 per can attempted; latency: their median / p95. Missed: over the deadline (the current motion went
-on); failed: no valid plan within it; by stage: the step that failed them. Splice speed: the
-largest joint speed at the splice, median over splices. Contacts: episodes of the robot or the
+on); failed: no valid plan within it; by stage: the step that failed them ("start": the arm's place
+collided in the world of the moment). Drift splice speed: the largest joint speed at the splice of
+a drift replan (made while moving), median. Release updates: re-aims of a release at a new
+estimate. Escapes: the arm backing away from a person or bin that came into it. Contacts: episodes of the robot or the
 carried can touching the bin or the person; near misses and SSM holds (protective stops for the
 person) beside them. Jump: the largest jump of the command at a splice (position rad, velocity
 rad/s). Grasp-release: median time from the closed grasp to the release.
@@ -54,12 +57,13 @@ MIN_SCENES = 4
 PAIRED_CAPTION = (
     "Paired differences between planners. The unit is an episode: one scene, one seeded bin path, one "
     "speed (and latency and release mode), which every planner meets. For each episode both planners ran "
-    "(status ok, at least one can attempted each), d = A's cans in the bin per can attempted minus B's; the "
+    "(ok or crashed; a crash delivers none), d = A's cans in the bin per can offered minus B's; the "
     "table gives the episodes paired, the mean of d in percentage points and its 95% interval from a "
     "percentile bootstrap (10,000 resamples, seed 0) over scenes, each with all its episodes: the bin paths of "
     "one scene share its cans and static plans, so the scene is the independent unit; established: the "
     "interval excludes 0; "
-    "A ahead / B ahead: the episodes where each put more in the bin. \"all\" pools every speed. Over few "
+    "A ahead / B ahead: the episodes where each put more in the bin. \"all\" pools every speed above 0. The "
+    "pairing is on scenes and bin-path seeds, not on states (each planner reaches the bin at its own moments). Over few "
     "episodes a percentile bootstrap interval is too narrow (over 2 it takes at most 3 values), so a difference "
     f"is called established only over at least {MIN_PAIRED} paired episodes from {MIN_SCENES} scenes. No "
     "correction for the number of comparisons (pairs x speeds) is made: read a single 'yes' among many rows "
