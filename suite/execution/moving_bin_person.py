@@ -19,7 +19,7 @@ A mixin of `suite.execution.moving_bin_episode.Episode` over the geometry and fo
   into its place in the world of the moment, the gripper backs away
   from them, horizontally at `ESCAPE_SPEED_M_S` and up at `ESCAPE_RISE_M_S`, by differential IK
   (`suite.execution.track.tracking_motion`), then stops; the motion is validated in the world of
-  the moment without the person (`suite.execution.replan.escape_reason`: it starts inside a
+  the moment without the person (`suite.execution.replan.loop_motion_reason`: it starts inside a
   margin and leads out, so it must be free from its first free sample on), straight away first,
   then 45 degrees to either side. The loop then
   plans again from there. Not checked against the person's predicted path: it moves away from
@@ -139,7 +139,7 @@ class PersonGuard:
     def _escape(self, t: float) -> bool:
         """Back the gripper away from the person who walked into the standing arm (module
         docstring), from rest at the stream's end; False if no escape is valid (or none is left)."""
-        from suite.execution.replan import escape_reason
+        from suite.execution.replan import loop_motion_reason
         from suite.execution.splice import stopping_blend
         from suite.execution.track import tracking_motion
 
@@ -167,7 +167,7 @@ class PersonGuard:
                 continue
             dense = np.concatenate([track.sample(np.linspace(0.0, track.duration_s, 24))[0],
                                     stop.sample(np.linspace(0.0, stop.duration_s, 12))[0]])
-            if escape_reason(template, self.s, self.estimator.predict(t, t), dense) is not None:
+            if loop_motion_reason(template, self.s, self.estimator.predict(t, t), dense) is not None:
                 continue
             self.escapes += 1
             width = st.at(t).width(t)[0]

@@ -142,7 +142,7 @@ class ReleaseSteps:
         in the world of the moment without the person, the can held until the opening starts
         (t_open_s into the motion) and the fingers open after it. Differential IK knows no
         obstacle and no self-collision (a release near the robot's base folds the elbow)."""
-        from suite.execution.replan import escape_reason
+        from suite.execution.replan import loop_motion_reason
 
         bin_xy = self.estimator.predict(t, t)
         n = max(2, int(np.ceil(track.duration_s / 0.02)) + 1)
@@ -151,7 +151,7 @@ class ReleaseSteps:
         held, opening = q[ts <= t_open_s + 1e-9], q[ts >= t_open_s - 1e-9]
         for template, part in ((self.transit_template, held), (self.return_template, opening)):
             if len(part) >= 2:
-                why = escape_reason(template, self.s, bin_xy, part, leading_collisions=False)
+                why = loop_motion_reason(template, self.s, bin_xy, part, leading_collisions=False)
                 if why is not None:
                     return why
         return None

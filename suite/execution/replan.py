@@ -100,16 +100,27 @@ def _waypoints(robot, q_b: np.ndarray, poses: list[np.ndarray], t0: float) -> tu
     return tuple(out)
 
 
+def moment_scene(template: PlanningProblem, scenario: MovingBinScenario, bin_xy_m, *, person: bool = True) -> Scene:
+    """The scene of the moment: the template's station with the bin centre at bin_xy_m, and the
+    person beside it (or, with `person` False, without them)."""
+    spec = template.scene.spec
+    if person:
+        spec = spec_with_bin_at(scenario, spec, bin_xy_m)
+    else:
+        spec = dataclasses.replace(spec, bin=dataclasses.replace(
+            spec.bin, center_xy_m=(float(bin_xy_m[0]), float(bin_xy_m[1]))))
+    return Scene(spec, template.scene.seed, template.scene.cans)
+
+
 def start_free(template: PlanningProblem, scenario: MovingBinScenario, bin_xy_m, q: np.ndarray) -> bool:
     """Is q free in the world of the moment (the bin and the person where bin_xy_m puts them)?"""
     from planners.worlds import collision_world
 
-    spec = template.scene.spec
-    scene = Scene(spec_with_bin_at(scenario, spec, bin_xy_m), template.scene.seed, template.scene.cans)
+    scene = moment_scene(template, scenario, bin_xy_m)
     return collision_world(template.with_(scene=scene)).is_free(np.asarray(q, float))
 
 
-def escape_reason(template: PlanningProblem, scenario: MovingBinScenario, bin_xy_m, polyline: np.ndarray, *,
+def loop_motion_reason(template: PlanningProblem, scenario: MovingBinScenario, bin_xy_m, polyline: np.ndarray, *,
                   leading_collisions: bool = True) -> str | None:
     """The validator's verdict on a motion the loop makes itself (an escape, a release's tracking;
     its dense polyline) in the world of the moment without the person (the station with the bin at
@@ -120,9 +131,7 @@ def escape_reason(template: PlanningProblem, scenario: MovingBinScenario, bin_xy
     from planners.worlds import collision_world
     from suite.scoring.validate import validate_path
 
-    spec = template.scene.spec
-    b = dataclasses.replace(spec.bin, center_xy_m=(float(bin_xy_m[0]), float(bin_xy_m[1])))
-    scene = Scene(dataclasses.replace(spec, bin=b), template.scene.seed, template.scene.cans)
+    scene = moment_scene(template, scenario, bin_xy_m, person=False)
     polyline = np.asarray(polyline, float)
     problem = template.with_(scene=scene, q_start=polyline[0], q_goal=polyline[-1])
     world = collision_world(problem)
@@ -197,7 +206,7 @@ def plan_online(
 
     robot = load_robot(template.scene.spec.robot)
     spec = template.scene.spec
-    scene = Scene(spec_with_bin_at(scenario, spec, bin_xy_m), template.scene.seed, template.scene.cans)
+    scene = moment_scene(template, scenario, bin_xy_m)
     problem = template.with_(scene=scene)
     q_s = np.asarray(q_s, float)
     world = collision_world(problem)
