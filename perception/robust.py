@@ -21,7 +21,8 @@ refuses what the fits do not support.
      the confidence is the extent's length over the can's.
    A detection below `min_confidence` is refused (logged), never grasped.
 5. Given the side cameras' frames, an upright detection whose side they see narrower than a
-   can's (`perception.side_view`: the seed paper's hourglass) is refused as a look-alike.
+   can's all round at some height (`perception.side_view`: the seed paper's hourglass) is
+   refused as a look-alike.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from perception.crop import roi_mask
 from perception.geometry import axis_yaw_tls, back_project_camera, camera_to_world, project
 from perception.grasps import CanDetection, FrameAnalysis, PerceptionParams, detect_cans
 from perception.plane import ransac_plane
-from perception.side_view import looks_alike, side_views, world_points
+from perception.side_view import SIDE_TOLERANCE_M, looks_alike, side_profile, world_points
 from scenes.grasp_rule import make_grasp
 from scenes.render import CameraImage
 from scenes.spec import SceneSpec
@@ -288,11 +289,12 @@ def detect_cans_robust(
                         "lying" if det.lying else "upright", xy[0], xy[1], conf, floor)
             continue
         if side_points and not det.lying:
-            views = side_views(xy, side_points, spec)
-            if looks_alike(views, radius_m=r, tolerance_m=params.base.shape_tolerance_m):
-                log.warning("upright can at (%.3f, %.3f): its side is %s from the axis (r = %.1f mm): a look-alike, "
-                            "refused, no grasp", xy[0], xy[1], ", ".join(f"{1e3 * v.median_radius_m:.1f} mm ({v.camera})"
-                                                                      for v in views if v.points), 1e3 * r)
+            profile = side_profile(xy, side_points, spec)
+            if looks_alike(profile, radius_m=r):
+                log.warning("upright can at (%.3f, %.3f): its side narrows to %.1f mm from the axis at %.0f%% of its "
+                            "height (r = %.1f mm, tolerance %.1f mm; %s): a look-alike, refused, no grasp", xy[0], xy[1],
+                            1e3 * profile.waist_m, 100 * profile.waist_height, 1e3 * r, 1e3 * SIDE_TOLERANCE_M,
+                            ", ".join(profile.cameras))
                 continue
         grasp = make_grasp(can_id=len(out), p_xy_m=xy, top_z_m=det.top_z_m, lying=det.lying, axis_yaw_rad=yaw,
                            top_offset_m=spec.grasp.top_offset_m, pregrasp_height_m=spec.grasp.pregrasp_height_m)

@@ -14,8 +14,9 @@ for feasibility (waypoints reachable by collision-aware IK; redrawn otherwise) a
 - `clutter`: a dense plate (8-12 cans, gaps 0-1 cm) with distractors (bottles, boxes, cups) that
   are obstacles and never recyclable.
 - `lookalike`: clutter's draw, then the seed paper's look-alikes (`scenes.lookalikes`): red
-  hourglasses with a can's radius and height, and dented cans, all obstacles (never recyclable
-  here: what is measured is whether perception would grasp them).
+  hourglasses with a can's radius and height, and dented cans, all obstacles in physics. The
+  evaluation counts a dented can as a can (`perception.evaluate.truth_cans`) and a grasped
+  hourglass as a false detection.
 """
 
 from __future__ import annotations
@@ -289,7 +290,8 @@ def _draw_lookalike(ranges: LookalikeRanges, spec: SceneSpec, rng: np.random.Gen
         yaw = float(rng.uniform(-math.pi, math.pi))
         band = float(rng.uniform(-0.15, 0.15)) * h
         if kind == "hourglass":
-            extra += la.hourglass(i, p_xy_m=p, plate_top_z_m=top, radius_m=r, height_m=h, color_rgba=spec.can.color_rgba)
+            extra += la.hourglass(i, p_xy_m=p, plate_top_z_m=top, radius_m=r, height_m=h, color_rgba=spec.can.color_rgba,
+                                  waist_fraction=ranges.hourglass_waist)
         elif lying:  # the dent faces up, within 60 degrees (what the top camera sees of it)
             X = la.lying_frame(p_xy_m=p, yaw_rad=yaw, plate_top_z_m=top, radius_m=r, roll_rad=0.0)
             extra += la.dented_can(i, X_WC=X, dent_dir_rad=math.pi + float(rng.uniform(-1.0, 1.0)) * math.pi / 3,

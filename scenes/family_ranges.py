@@ -107,10 +107,13 @@ class ClutterRanges(_Ranges):
 @dataclasses.dataclass(frozen=True)
 class LookalikeRanges(ClutterRanges):
     """Clutter's plate with the seed paper's look-alikes (`scenes.lookalikes`): red hourglasses that
-    match a can from above, and dented cans (upright or lying, as the cans are)."""
+    match a can from above, and dented cans (upright or lying, as the cans are). `hourglass_waist`
+    is the hourglasses' waist over the can's radius (a value, not a range: it draws nothing, so a
+    scene's draw is the same at any waist)."""
 
     hourglasses: count_range_within(0, 6) = (1, 2)
     dented: count_range_within(0, 6) = (1, 2)
+    hourglass_waist: within(0.05, 1.0) = 0.55
     generator: ClassVar[str] = "lookalike"
 
 

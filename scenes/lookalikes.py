@@ -4,8 +4,10 @@
 
 - Hourglass (`hourglass_N_k`, k = 0 at the bottom): `HOURGLASS_SECTIONS` coaxial cylinders
   stacked to the can's height; the bottom and top sections have the can's radius (a can's flat top
-  and rim from above), the ones between narrow linearly to a waist of `HOURGLASS_WAIST_FRACTION`
-  of it at mid-height. The top camera sees a can's disc; only a side view shows the waist.
+  and rim from above), the ones between narrow linearly to a waist of `waist_fraction` of it at
+  mid-height (`HOURGLASS_WAIST_FRACTION` by default; the family's `hourglass_waist`, and
+  `with_hourglass_waist` for a sweep over the same scenes). The top camera sees a can's disc; only
+  a side view shows the waist.
 - Dented can (`dented_N_bottom`, `_band`, `_top`): a can of the spec's size and colour whose side
   is pushed in over a band of its length. Primitives cannot be cut, so the dent is approximated:
   over the band, the body is a cylinder of radius r - d/2 whose axis is moved d/2 away from the
@@ -16,11 +18,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
-from scenes.spec import Obstacle, pose_tuple
+from scenes.errors import SuiteError
+from scenes.spec import Obstacle, SceneSpec, pose_tuple
 
 HOURGLASS_PREFIX = "hourglass_"
 DENTED_PREFIX = "dented_"
@@ -44,11 +48,15 @@ def _rz(a: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def hourglass(index: int, *, p_xy_m, plate_top_z_m: float, radius_m: float, height_m: float, color_rgba) -> list[Obstacle]:
-    """The parts of an upright hourglass standing at `p_xy_m` on the plate (see the module docstring)."""
+def hourglass(index: int, *, p_xy_m, plate_top_z_m: float, radius_m: float, height_m: float, color_rgba,
+              waist_fraction: float = HOURGLASS_WAIST_FRACTION) -> list[Obstacle]:
+    """The parts of an upright hourglass standing at `p_xy_m` on the plate (see the module
+    docstring), its waist `waist_fraction` of `radius_m`."""
+    if not 0.0 < waist_fraction <= 1.0:
+        raise SuiteError(f"hourglass waist fraction {waist_fraction}: allowed (0, 1] of the can's radius")
     n = HOURGLASS_SECTIONS
     dz = height_m / n
-    waist = HOURGLASS_WAIST_FRACTION * radius_m
+    waist = waist_fraction * radius_m
     half = (n - 1) / 2
     out = []
     for k in range(n):
@@ -100,3 +108,27 @@ def dented_pose(parts: list[Obstacle], *, height_m: float) -> tuple[np.ndarray, 
     axis = X0[:3, 2]
     centre = X0[:3, 3] + axis * (height_m / 2 - bot.size_m[1] / 2)
     return centre, axis
+
+
+def with_hourglass_waist(spec: SceneSpec, waist_fraction: float) -> SceneSpec:
+    """The same drawn scene with every hourglass rebuilt to a waist of `waist_fraction` of the
+    can's radius (same place, size and colour; nothing else moves). At the family's waist it is
+    the scene as drawn: the hourglass's waist does not enter any draw."""
+    r, h = spec.can.radius_m, spec.can.height_m
+    rebuilt: dict[str, list[Obstacle]] = {}
+    for name, parts in groups(spec.extra, HOURGLASS_PREFIX).items():
+        bottom = min(parts, key=lambda o: o.pose()[2, 3])
+        p = bottom.pose()[:3, 3]
+        rebuilt[name] = hourglass(int(name[len(HOURGLASS_PREFIX):]), p_xy_m=(float(p[0]), float(p[1])),
+                                  plate_top_z_m=float(p[2] - bottom.size_m[1] / 2), radius_m=r, height_m=h,
+                                  color_rgba=bottom.color_rgba, waist_fraction=waist_fraction)
+    extra, done = [], set()
+    for o in spec.extra:
+        name = o.name.rsplit("_", 1)[0]
+        if o.name.startswith(HOURGLASS_PREFIX) and name in rebuilt:
+            if name not in done:
+                extra += rebuilt[name]
+                done.add(name)
+        else:
+            extra.append(o)
+    return dataclasses.replace(spec, extra=tuple(extra))

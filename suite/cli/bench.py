@@ -9,6 +9,7 @@ import importlib
 TARGETS = {
     "collision": "suite.bench.collision",
     "perception": "suite.bench.perception",
+    "lookalike": "suite.bench.lookalike",
     "planners": "suite.bench.planners",
     "compare": "suite.bench.compare",
     "execution": "suite.bench.execution",
