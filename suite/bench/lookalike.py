@@ -137,6 +137,7 @@ def measure(*, seed: int, scenes: int, waists: tuple[float, ...], sensors: tuple
     from scenes.sensor import SENSOR_PRESETS
     from scenes.spec import load_spec
 
+    commit = code_commit()  # before the run: the code imported is the code of this moment
     spec = load_spec(variant="lookalike")
     params = PerceptionParams(segmentation=segmentation)
     drawn, skipped, s = [], [], seed - 1
@@ -175,7 +176,6 @@ def measure(*, seed: int, scenes: int, waists: tuple[float, ...], sensors: tuple
                                      "distractor_grasps": len(m.distractor_grasps)}
                 records[name][-1]["by_waist"][f"{w:g}"] = row
         log.info("scene %d/%d (seed %d) done, %.0f s", i + 1, len(drawn), scene.seed, time.perf_counter() - t0)
-    commit = code_commit()
     out = {}
     for name in sensors:
         out[name] = {
