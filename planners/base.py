@@ -122,6 +122,25 @@ class Budget:
 
 
 @dataclasses.dataclass(frozen=True)
+class PlanWorld:
+    """The world a planner plans in when it is not the judge's: a world built from the cameras
+    (`perception.world`). The judge (validator, certifier, metrics) and the physics keep the
+    problem's own scene, held can and removed cans: the truth.
+
+    Attributes:
+        scene: the planner's scene (its fixtures, voxel boxes and perceived cans).
+        held: the can the planner believes is in the gripper (its perceived pose), or None.
+        removed_can_ids: the planner's cans already recycled (ids of `scene`'s cans).
+        source: where the world comes from (`perceived`).
+    """
+
+    scene: Scene
+    held: HeldCan | None
+    removed_can_ids: tuple[int, ...]
+    source: str = "perceived"
+
+
+@dataclasses.dataclass(frozen=True)
 class TaskWaypoint:
     """A gripper pose of the nominal trajectory at a time of the paper's schedule (time units)."""
 
@@ -155,6 +174,8 @@ class PlanningProblem:
             it is no part of the problem's identity.
         budget_clock: the clock `time_limit_s` is measured on: "wall" (elapsed time) or "cpu"
             (the planner's process's CPU time; `Budget`).
+        plan_world: the world the planner plans in when it is not `scene` (a perceived world:
+            `for_planner`); None: the planner plans in the truth.
     """
 
     kind: str
@@ -172,6 +193,7 @@ class PlanningProblem:
     pre_status: PlanStatus | None = None
     warm_start: np.ndarray | None = None
     budget_clock: str = "wall"
+    plan_world: PlanWorld | None = None
 
     @property
     def name(self) -> str:
@@ -189,6 +211,14 @@ class PlanningProblem:
 
     def with_(self, **changes) -> "PlanningProblem":
         return dataclasses.replace(self, **changes)
+
+    def for_planner(self) -> "PlanningProblem":
+        """The problem as its planner sees it: in its `plan_world` when it has one (the same
+        configurations, budget and seed), else itself."""
+        w = self.plan_world
+        if w is None:
+            return self
+        return dataclasses.replace(self, scene=w.scene, held=w.held, removed_can_ids=w.removed_can_ids, plan_world=None)
 
 
 def resample_by_length(path: np.ndarray, n: int) -> np.ndarray:

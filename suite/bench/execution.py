@@ -41,6 +41,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "paper,robust (default paper)")
     p.add_argument("--segmentation", default="color", metavar="NAME",
                    help="perceived grasps: color (the paper's HSV rule, default) or geometric")
+    p.add_argument("--worlds", default="perceived", metavar="LIST",
+                   help="perceived grasps: the worlds the planners plan in, each its own source: perceived (built "
+                        "from the cameras, default), truth, or truth,perceived; truth grasps plan in the truth")
     p.add_argument("--json", metavar="FILE", default=None, help="also write every execution record to FILE")
 
 
@@ -59,9 +62,27 @@ def perception_setups(args: argparse.Namespace) -> list:
                             depth_noise_m=args.depth_noise_m) for n in names]
 
 
-def source_label(grasps: str, setup) -> str:
-    """A grasp source's name in the printed tables: `truth` or `perceived (robust, kinect-v1)`."""
-    return grasps if setup is None else f"{grasps} ({setup.label()})"
+def source_label(grasps: str, setup, world: str = "truth") -> str:
+    """A source's name in the printed tables: `truth grasps` or `perceived grasps (robust, kinect-v1),
+    perceived world`."""
+    return "truth grasps" if setup is None else f"{grasps} grasps ({setup.label()}), {world} world"
+
+
+def world_list(text: str) -> list[str]:
+    """The --worlds list (raises `SuiteError` naming a bad value and what is allowed)."""
+    from scenes.errors import SuiteError
+    from suite.run.runner import WORLDS
+
+    worlds = [w for w in str(text).split(",") if w]
+    bad = [w for w in worlds if w not in WORLDS]
+    if not worlds or bad:
+        raise SuiteError(f"--worlds {text!r}: {bad[0] if bad else 'no world'}; allowed: {', '.join(WORLDS)}")
+    return list(dict.fromkeys(worlds))
+
+
+def _source_of(record: dict) -> tuple:
+    return (record.get("grasps"), json.dumps(record.get("perception"), sort_keys=True),
+            (record.get("worlds") or {}).get("planned", "truth"))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -82,18 +103,20 @@ def run(args: argparse.Namespace) -> int:
         if g not in ("truth", "perceived"):
             raise SuiteError(f"unknown grasp source {g!r}; allowed: truth, perceived")
     setups = perception_setups(args)
-    # every grasp source: (grasps, perception setup or None for the truth)
-    sources = [(g, s) for g in grasp_modes for s in ((None,) if g == "truth" else setups)]
+    worlds = world_list(args.worlds)
+    # every source: (grasps, perception setup or None for the truth, the world planned in)
+    sources = [(g, s, w) for g in grasp_modes for s in ((None,) if g == "truth" else setups)
+               for w in (("truth",) if g == "truth" else worlds)]
     configs = {p: config_dict(make_config(planner_class(p), None)) for p in planners}
     jobs = []
     for variant in variants:
         spec = load_spec(variant=variant).with_can_count(args.cans)
         for seed in range(args.first_seed, args.first_seed + args.scenes):
             scene = generate_scene(spec, seed=seed)
-            for grasps, setup in sources:
+            for grasps, setup, world in sources:
                 for p in planners:
                     jobs.append(ExecutionJob(p, configs[p], scene, grasps, 5.0, seed, reperceive=args.reperceive,
-                                             perception=setup))
+                                             perception=setup, world=world))
     print(f"{len(jobs)} executions ({len(planners)} planners x {len(variants)} variants x {args.scenes} scenes "
           f"x {len(sources)} grasp sources, {args.cans} cans each) on {args.jobs} worker(s)")
     t0 = time.perf_counter()
@@ -104,11 +127,24 @@ def run(args: argparse.Namespace) -> int:
             json.dump({"executions": records}, f, indent=1)
     from suite.report.summary_execution import execution_table
 
+    from suite.report.summary_perceived import paired_lines, perceived_world_lines
+
     for variant in variants:
-        for grasps, setup in sources:
-            print(f"\n{variant}, {source_label(grasps, setup)} grasps{' (closed loop)' if args.reperceive else ''}:")
-            want = None if setup is None else setup.to_json()
-            subset = [r for r in records if r["variant"] == variant and r["grasps"] == grasps
-                      and r.get("perception") == want]
+        for grasps, setup, world in sources:
+            print(f"\n{variant}, {source_label(grasps, setup, world)}{' (closed loop)' if args.reperceive else ''}:")
+            want = _source_of({"grasps": grasps, "perception": None if setup is None else setup.to_json(),
+                               "worlds": {"planned": world}})
+            subset = [r for r in records if r["variant"] == variant and _source_of(r) == want]
             print(execution_table(subset, planners=planners, tablefmt="simple"))
+            if world == "perceived":
+                print("\n".join(perceived_world_lines(subset, planners=planners)))
+        base = [r for r in records if r["variant"] == variant and _source_of(r)[0] == "truth"]
+        for grasps, setup, world in sources:
+            if grasps == "truth" or not base:
+                continue
+            want = _source_of({"grasps": grasps, "perception": setup.to_json(), "worlds": {"planned": world}})
+            other = [r for r in records if r["variant"] == variant and _source_of(r) == want]
+            print(f"\n{variant}: {source_label(grasps, setup, world)}, "
+                  "cans in the bin per scene (paired against truth grasps in the true world):")
+            print("\n".join(paired_lines(base, other, planners=planners)))
     return 0

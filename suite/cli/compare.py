@@ -22,7 +22,7 @@ from suite.run.runner import TRIALS_FILE, CompareConfig
 
 RESULTS_DIR = Path("results")
 #: Flags that describe generated scenes (they cannot be combined with --dataset).
-GENERATED_FLAGS = ("variant", "scenes", "cans", "grasps")
+GENERATED_FLAGS = ("variant", "scenes", "cans", "grasps", "world")
 #: CompareConfig's settings a flag of the same name sets as it is (--planners and --dataset are
 #: read apart: a list, and the choice between stored and generated problems).
 FLAG_SETTINGS = tuple(f.name for f in dataclasses.fields(CompareConfig)
@@ -47,6 +47,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cans", type=positive_int, default=None, help=f"cans per generated scene (default {d.cans})")
     p.add_argument("--grasps", choices=("perceived", "truth"), default=None,
                    help=f"generated scenes' grasps from perception or from ground truth (default {d.grasps})")
+    p.add_argument("--world", choices=("perceived", "truth"), default=None,
+                   help="the world the planners plan in: built from the cameras, or the truth (default: perceived "
+                        "with perceived grasps, else truth); the judge and the physics use the truth")
     p.add_argument("--time-limit-s", type=positive_float, default=None,
                    help=f"planning budget per problem, seconds (default {d.time_limit_s})")
     p.add_argument("--budgets", type=budget_list, default=None, metavar="B1,B2,...",
@@ -232,6 +235,9 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
         variants = available_variants(config.spec)
         if config.variant not in variants:
             raise SuiteError(f"unknown variant {config.variant!r}; allowed: {variants}")
+        from suite.run.runner import plan_world_for
+
+        plan_world_for(config.grasps, config.world)  # --world perceived needs perceived grasps
     return config
 
 
@@ -340,7 +346,8 @@ def _execution_jobs(trials, out: Path, config: CompareConfig, *, reperceive: boo
         shared = _shared_steps(trials, steps, pose=pose_settings(dataset.manifest))
     return jobs_from_records(trials, read_trials(out / TRIALS_FILE), grasps=config.grasps,
                              time_limit_s=config.time_limit_s, seed=config.seed, reperceive=reperceive,
-                             replay_dir=replay_dir, cycle_steps=steps, shared_steps=shared, picking_orders=orders)
+                             replay_dir=replay_dir, cycle_steps=steps, shared_steps=shared, picking_orders=orders,
+                             world=config.world)
 
 
 def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, progress_bar: bool) -> None:

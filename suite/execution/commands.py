@@ -162,6 +162,8 @@ class WorldState:
         images: the cameras' frames (name -> scenes.render.CameraImage) rendered from the
             simulation right after the last release over the bin, where the arm is out of the
             plate cameras' view; None before the first release or without cameras.
+        q_images: the arm's joint positions when `images` were rendered (its points are left out
+            of a perceived world), or None.
     """
 
     t_s: float
@@ -169,6 +171,7 @@ class WorldState:
     q_command: np.ndarray
     X_WCans: dict[int, np.ndarray]
     images: dict | None
+    q_images: np.ndarray | None = None
 
 
 #: Given the world between cycles, the next can's cycle, or None to stop (with a reason).

@@ -55,6 +55,8 @@ class ExecutionJob:
         perception: with `grasps="perceived"`, how they are perceived (pipeline, segmentation,
             sensor model; `perception.pipeline.PerceptionSetup`); None: the paper's pipeline on
             the spec's cameras.
+        world: the world the planners plan in, `truth` or `perceived` (None: the perceived one with
+            perceived grasps; `suite.run.runner.plan_world_for`). Judge and physics use the truth.
     """
 
     planner: str
@@ -69,10 +71,14 @@ class ExecutionJob:
     replay_path: str | None = None
     config: ExecutionConfig = ExecutionConfig()
     perception: PerceptionSetup | None = None
+    world: str | None = None
 
 
-def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob) -> list[tuple[int, tuple, str]]:
-    """Plan every problem (five per can, in order): per can its paths and first failed status."""
+def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob,
+              induced: list | None = None, planning_s: list | None = None) -> list[tuple[int, tuple, str]]:
+    """Plan every problem (five per can, in order): per can its paths and first failed status.
+    A path free in the planner's perceived world that the judge rejects in the truth is appended to
+    `induced` (can, problem kind, where, what it struck, cause); each planning time (s) to `planning_s`."""
     from suite.run.trial import run_problem
 
     out = []
@@ -83,8 +89,13 @@ def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob) -> list[tu
             rec = run_problem(problem, planner=job.planner, planner_config=job.planner_config, run_seed=job.seed)
             ok = rec["status"] == "success"
             paths.append(rec["path"] if ok else None)
+            found = rec.get("stats", {}).get("perception_induced")
+            if planning_s is not None and rec.get("planning_time_s") is not None:
+                planning_s.append(float(rec["planning_time_s"]))
+            if found is not None and induced is not None:
+                induced.append({"can": problem.can_id, "kind": problem.kind, **found})
             if not ok and not failed:
-                failed = f"{problem.kind} {rec['status']}"
+                failed = f"{problem.kind} {rec['status']}" + (f" (perception-induced: {found['cause']})" if found else "")
         out.append((chunk[0].can_id, tuple(paths), failed))
     return out
 
@@ -117,17 +128,22 @@ def can_pose_from(can_id: int, X_WC: np.ndarray) -> CanPose:
     return CanPose(can_id, tuple(float(v) for v in X_WC[:3, 3]), lying, yaw)
 
 
-def _closed_loop(job: ExecutionJob):
+def _closed_loop(job: ExecutionJob, induced: list, worlds: list, planning_s: list):
     """Between cycles: look again, rebuild the scene from where the cans now are, plan the next
-    can, and hand its cycle to the simulation."""
-    from perception.pipeline import GRASP_CAMERA, detect_cans, detect_in_frames, noise_rng
+    can, and hand its cycle to the simulation. In a perceived world, the world is rebuilt from
+    every camera's fresh frame (the arm, at its pose when they were taken, left out); the truth of
+    where the cans are serves the judge only. Perception-induced failures go to `induced`, each
+    world's summary to `worlds`."""
+    from perception.pipeline import GRASP_CAMERA, PerceptionSetup, detect_cans, detect_in_frames, noise_rng
     from perception.side_view import SIDE_CAMERAS
     from scenes.grasp_rule import truth_grasp
     from scenes.render import render
     from suite.problems.cycle import build_problems
+    from suite.run.runner import plan_world_for
 
     spec = job.scene.spec
     tried: set[int] = set()
+    perceived_world = plan_world_for(job.grasps, job.world) == "perceived"
 
     def provide(world: WorldState):
         cans = [can_pose_from(i, X) for i, X in sorted(world.X_WCans.items())
@@ -135,8 +151,20 @@ def _closed_loop(job: ExecutionJob):
         if not cans:
             return None, ""
         now = Scene(spec, job.scene.seed, tuple(cans))
+        seen = None
         if job.grasps == "truth":
             grasp = truth_grasp(now, cans[0])
+        elif perceived_world:
+            from perception.world import perceive_world
+
+            rng = noise_rng(job.scene.seed, *([len(tried)] if tried else []))
+            detections, seen = perceive_world(now if world.images is None else job.scene,
+                                              setup=job.perception or PerceptionSetup(), rng=rng,
+                                              images=world.images, q_robot=world.q_images)
+            worlds.append(seen.summary())
+            if not detections:
+                return None, f"{len(cans)} can(s) left on the plate, none detected"
+            grasp = detections[0].grasp
         else:
             # Before the first pick the arm has not yet moved into view (as in open loop); later
             # frames were taken from the simulation just after the last release over the bin.
@@ -153,8 +181,8 @@ def _closed_loop(job: ExecutionJob):
                 return None, f"{len(cans)} can(s) left on the plate, none detected"
             grasp = detections[0].grasp
         problems = build_problems(now, [grasp], time_limit_s=job.time_limit_s, seed=job.seed,
-                                  q_home=world.q_command)
-        (can_id, paths, failed), = plan_cans(problems, job)
+                                  q_home=world.q_command, world=seen)
+        (can_id, paths, failed), = plan_cans(problems, job, induced, planning_s)
         tried.add(can_id)
         if failed:
             return None, f"can {can_id}: {failed}"
@@ -167,23 +195,31 @@ def _closed_loop(job: ExecutionJob):
 def run_execution(job: ExecutionJob) -> dict[str, Any]:
     """Plan if needed, execute in physics, write the replay; the outcome as a JSON record."""
     from suite.problems.cycle import build_problems
-    from suite.run.runner import scene_grasps
+    from suite.run.runner import plan_world_for, scene_task
 
     scene = job.scene
+    induced: list[dict] = []  # perception-induced failures
+    worlds: list[dict] = []  # the perceived worlds planned in
+    planning_s: list[float] = []  # every problem's planning time
 
-    def first_problems(grasps):
-        return build_problems(scene, grasps, time_limit_s=job.time_limit_s, seed=job.seed)
+    def first_problems(first_only: bool = False):
+        grasps, seen = scene_task(scene, grasps=job.grasps, perception=job.perception, world=job.world)
+        if seen is not None:
+            worlds.append(seen.summary())
+        return build_problems(scene, grasps[:1] if first_only else grasps, time_limit_s=job.time_limit_s,
+                              seed=job.seed, world=seen)
 
     # The arm starts where the first approach starts (above the plate); the goal IK behind it runs
     # once: from the problems this job plans, or from the first grasp's problems alone.
     if job.reperceive:
-        provider = _closed_loop(job)
-        q_home = first_problems(scene_grasps(scene, grasps=job.grasps, perception=job.perception)[:1])[0].q_start
+        provider = _closed_loop(job, induced, worlds, planning_s)
+        q_home = first_problems(first_only=True)[0].q_start
+        worlds.clear()  # the closed loop builds its own (the first from the same frames)
     elif job.cans is None:
-        problems = first_problems(scene_grasps(scene, grasps=job.grasps, perception=job.perception))
+        problems = first_problems()
         if not problems:
             raise RuntimeError(f"no grasps to plan: {job.grasps} grasps found no can")
-        provider, q_home = _open_loop(plan_cans(problems, job)), problems[0].q_start
+        provider, q_home = _open_loop(plan_cans(problems, job, induced, planning_s)), problems[0].q_start
     else:
         provider, q_home = _open_loop(job.cans), np.asarray(job.q_home, float)
     meshcat = meshcat_for(scene) if job.replay_path else None
@@ -191,6 +227,11 @@ def run_execution(job: ExecutionJob) -> dict[str, Any]:
                              meshcat=meshcat, cameras=job.reperceive and job.grasps == "perceived")
     record = outcome.to_json()
     record.update(grasps=job.grasps, reperceive=job.reperceive, config=dataclasses.asdict(job.config))
+    record["worlds"] = {"planned": plan_world_for(job.grasps, job.world), "judged": "truth", "physics": "truth"}
+    if worlds:
+        record["perceived_worlds"] = worlds
+    record["perception_induced"] = induced
+    record["planning_time_s"] = round(sum(planning_s), 4) if planning_s else None
     if job.perception is not None and job.grasps == "perceived":
         record["perception"] = job.perception.to_json()
     if meshcat is not None:
@@ -215,7 +256,7 @@ def meshcat_for(scene: Scene):
 def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str, time_limit_s: float,
                       seed: int, reperceive: bool, replay_dir: Path | None,
                       cycle_steps: dict | None = None, shared_steps: dict | None = None,
-                      picking_orders: dict | None = None) -> list[ExecutionJob]:
+                      picking_orders: dict | None = None, world: str | None = None) -> list[ExecutionJob]:
     """One job per planner and scene of a comparison run, its plans taken from the trial records.
 
     Args:
@@ -281,7 +322,7 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
             planner=planner, planner_config=configs[planner], scene=scenes[key], grasps=grasps,
             time_limit_s=time_limit_s, seed=seed, reperceive=reperceive, replay_path=replay,
             cans=None if reperceive else tuple((c, tuple(p), f) for c, (p, f) in cans.items()),
-            q_home=None if q_home is None else tuple(float(v) for v in q_home),
+            q_home=None if q_home is None else tuple(float(v) for v in q_home), world=world,
         ))
     return jobs
 

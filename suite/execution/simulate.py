@@ -118,7 +118,7 @@ def execute_cycles(
         return WorldState(
             t_s=root.get_time(), q_arm=plant.GetPositions(pc, iiwa).copy(), q_command=stream.q_end,
             X_WCans={i: plant.EvalBodyPoseInWorld(pc, b).GetAsMatrix4() for i, b in monitor.can_bodies.items()},
-            images=snapshot.get("images"),
+            images=snapshot.get("images"), q_images=snapshot.get("q"),
         )
 
     wall0 = time.perf_counter()
@@ -155,7 +155,8 @@ def execute_cycles(
             from scenes.render import render_context
 
             p0 = time.perf_counter()
-            snapshot.update(cycle=len(attempted), images=render_context(sim.ds, root))
+            snapshot.update(cycle=len(attempted), images=render_context(sim.ds, root),
+                            q=plant.GetPositions(pc, iiwa).copy())
             provider_wall += time.perf_counter() - p0
         if on_progress is not None and t >= next_progress:
             on_progress(t, stream.duration_s)

@@ -14,7 +14,7 @@ import logging
 
 import numpy as np
 
-from planners.base import PlanningProblem, PlanStatus, TaskWaypoint
+from planners.base import PlanningProblem, PlanStatus, PlanWorld, TaskWaypoint
 from scenes.grasp_rule import Grasp, waypoint_pose
 from scenes.ik import Q_READY, IkOptions, PoseIk
 from scenes.scene import CanPose, HeldCan, Scene
@@ -124,12 +124,17 @@ def build_problems(
     q_home: np.ndarray | None = None,
     bin_warm_start: bool = True,
     goal_clearance_m: float = GOAL_CLEARANCE_M,
+    world=None,
 ) -> list[PlanningProblem]:
     """The named problems of the whole task, five per grasp, in execution order.
 
     Args:
-        scene: the scene (ground truth for collision).
+        scene: the scene (ground truth: what the judge and the physics use).
         grasps: one grasp per can to pick, in picking order (perceived or from ground truth).
+        world: a `perception.world.PerceivedWorld` the grasps were perceived with, or None. With
+            it, the goals are posed (IK) and the planners plan in it (each problem's `plan_world`:
+            its cans, the perceived can in the gripper, the perceived cans already recycled); the
+            problems' own scene, held can and removed cans stay the truth's, for the judge.
         time_limit_s: each problem's planning budget.
         seed: the seed of the goal IK restarts (deterministic); also the problems' base seed.
         q_home: the arm's configuration before the first cycle (default: IK above the plate).
@@ -150,7 +155,7 @@ def build_problems(
     task = tuple(waypoint_pose(p) for p in (wp.above_plate_m, wp.middle_m, wp.above_bin_m))
     X_plate = task[0]
     clear = {"min_distance_m": goal_clearance_m}
-    poser = _Poser(_IkCache(scene), np.random.default_rng([seed, 7919]),
+    poser = _Poser(_IkCache(scene if world is None else world.scene), np.random.default_rng([seed, 7919]),
                    *(dataclasses.replace(o, **clear) for o in (IkOptions(), NEAR_ONLY, WARM_BIN)))
     q_plate = poser.solve(X_plate, Q_READY, opening=spec.grasp.open_width_m)
     if q_plate is None:
@@ -160,15 +165,16 @@ def build_problems(
     q = q_plate if q_home is None else np.asarray(q_home, float)
     q_bin_before = None
     removed: tuple[int, ...] = ()
+    seen_removed: tuple[int, ...] = ()  # in the perceived world: its cans' ids
     problems: list[PlanningProblem] = []
     for grasp in grasps:
-        chain, q_bin, removed_after = _cycle(poser, scene, grasp, task, q=q, q_plate=q_plate, removed=removed,
-                                             q_bin_before=q_bin_before if bin_warm_start else None,
-                                             time_limit_s=time_limit_s, seed=seed)
+        chain, q_bin, removed_after, seen_after = _cycle(
+            poser, scene, grasp, task, q=q, q_plate=q_plate, removed=removed, world=world, seen_removed=seen_removed,
+            q_bin_before=q_bin_before if bin_warm_start else None, time_limit_s=time_limit_s, seed=seed)
         problems += chain
         # The next cycle starts above the plate; a can counts as gone once its cycle is posable.
         if q_bin is not None:
-            removed = removed_after
+            removed, seen_removed = removed_after, seen_after
             q_bin_before = q_bin
         q = q_plate
     return problems
@@ -176,41 +182,55 @@ def build_problems(
 
 def _cycle(poser: _Poser, scene: Scene, grasp: Grasp, task: tuple[np.ndarray, ...], *, q: np.ndarray,
            q_plate: np.ndarray, removed: tuple[int, ...], q_bin_before: np.ndarray | None, time_limit_s: float,
-           seed: int) -> tuple[list[PlanningProblem], np.ndarray | None, tuple[int, ...]]:
-    """One can's five problems from `q` (above the plate), its bin goal, and the cans gone after it.
-    `task` holds the gripper poses above the plate, in the middle and above the bin; `q_bin_before`
-    (the previous cycle's bin goal, or None) warm-starts the bin goal."""
+           seed: int, world=None, seen_removed: tuple[int, ...] = ()
+           ) -> tuple[list[PlanningProblem], np.ndarray | None, tuple[int, ...], tuple[int, ...]]:
+    """One can's five problems from `q` (above the plate), its bin goal, and the cans gone after it
+    (the truth's, and the perceived world's: `build_problems`). `task` holds the gripper poses above
+    the plate, in the middle and above the bin; `q_bin_before` (the previous cycle's bin goal, or
+    None) warm-starts the bin goal."""
     spec = scene.spec
     X_plate, X_middle, X_bin = task
     opening = spec.grasp.open_width_m
     truth = match_truth(scene.without_cans(removed), grasp)
     can_id = truth.id if truth is not None else -1 - grasp.can_id
+    # the goals are posed in the world the planners plan in: the truth's, or the perceived one
+    pose_removed = removed if world is None else seen_removed
     X_start = X_plate
     q_pre = poser.solve_via([*between(X_start, grasp.X_WGpre, 2), grasp.X_WGpre], q, opening=opening,
-                            removed=removed)
+                            removed=pose_removed)
     q_grasp = (poser.solve_via([*between(grasp.X_WGpre, grasp.X_WG, 2), grasp.X_WG], q_pre, opening=opening,
-                               removed=removed) if q_pre is not None else None)
+                               removed=pose_removed) if q_pre is not None else None)
     held = HeldCan.from_grasp(truth, grasp.X_WG) if truth is not None and q_grasp is not None else None
+    seen_held = None if world is None or q_grasp is None else world.held(grasp.can_id, grasp.X_WG)
+    pose_held = held if world is None else seen_held
     closed = 2 * spec.can.radius_m
     q_lift = None
-    if held is not None:
-        q_lift = poser.solve(X_plate, q_plate, opening=closed, held=held, removed=removed)
+    if pose_held is not None:
+        q_lift = poser.solve(X_plate, q_plate, opening=closed, held=pose_held, removed=pose_removed)
     removed_after = removed + ((truth.id,) if truth is not None else ())
+    seen_after = seen_removed + ((world.can_of_detection[grasp.can_id],) if world is not None else ())
+    pose_removed_after = removed_after if world is None else seen_after
     # Goals away from their start are reached by continuation along the task path (above the
     # plate -> pre-grasp; above the plate -> middle -> above the bin): seeded straight from the
     # start, the nearby seeds failed on some layouts (over the wall, at large wrist turns) and a
     # random restart landed on a flipped elbow or wrist that no motion along the path reaches.
     q_bin = None
     if q_lift is not None and q_bin_before is not None:
-        q_bin = poser.solve(X_bin, q_bin_before, opening=closed, held=held, removed=removed_after,
+        q_bin = poser.solve(X_bin, q_bin_before, opening=closed, held=pose_held, removed=pose_removed_after,
                             options=poser.warm_bin)
     if q_lift is not None and q_bin is None:
         via = [*between(X_plate, X_middle, 2), X_middle, *between(X_middle, X_bin, 2), X_bin]
-        q_bin = poser.solve_via(via, q_lift, opening=closed, held=held, removed=removed_after)
+        q_bin = poser.solve_via(via, q_lift, opening=closed, held=pose_held, removed=pose_removed_after)
 
-    def make(kind, q0, q1, X_goal, poses, *, held_=None, opening_=opening, removed_=removed):
+    def make(kind, q0, q1, X_goal, poses, *, holding=False, opening_=opening, after=False):
+        removed_ = removed_after if after else removed
+        held_ = held if holding else None
         t0, t1 = SCHEDULE[kind]
         times = np.linspace(t0, t1, len(poses))
+        plan_world = None
+        if world is not None:
+            plan_world = PlanWorld(world.scene, seen_held if holding else None,
+                                   seen_after if after else seen_removed)
         return PlanningProblem(
             kind=kind, scene=scene, can_id=can_id,
             q_start=np.full(7, np.nan) if q0 is None else np.asarray(q0, float),
@@ -220,17 +240,18 @@ def _cycle(poser: _Poser, scene: Scene, grasp: Grasp, task: tuple[np.ndarray, ..
             held=held_, gripper_opening_m=opening_, removed_can_ids=tuple(removed_),
             time_limit_s=time_limit_s, seed=seed,
             pre_status=None if (q0 is not None and q1 is not None) else PlanStatus.IK_FAILED,
+            plan_world=plan_world,
         )
 
     chain = [
         make("approach", q, q_pre, grasp.X_WGpre, [X_start, grasp.X_WGpre]),
         make("descend", q_pre, q_grasp, grasp.X_WG, [grasp.X_WGpre, grasp.X_WG]),
-        make("lift", q_grasp, q_lift, X_plate, [grasp.X_WG, X_plate], held_=held, opening_=closed),
-        make("transit", q_lift, q_bin, X_bin, [X_plate, X_middle, X_bin], held_=held, opening_=closed,
-             removed_=removed_after),
-        make("return", q_bin, q_plate, X_plate, [X_bin, X_middle, X_plate], removed_=removed_after),
+        make("lift", q_grasp, q_lift, X_plate, [grasp.X_WG, X_plate], holding=True, opening_=closed),
+        make("transit", q_lift, q_bin, X_bin, [X_plate, X_middle, X_bin], holding=True, opening_=closed,
+             after=True),
+        make("return", q_bin, q_plate, X_plate, [X_bin, X_middle, X_plate], after=True),
     ]
-    return chain, q_bin, removed_after
+    return chain, q_bin, removed_after, seen_after
 
 
 def benchmark_cycles(

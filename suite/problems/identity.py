@@ -72,6 +72,8 @@ def problem_id(problem: PlanningProblem, *, rule: str = CURRENT_RULE) -> str:
         "q_start": None if problem.q_start is None else hashed_list(problem.q_start, rule=rule),
         "q_goal": None if problem.q_goal is None else hashed_list(problem.q_goal, rule=rule),
     }
+    if problem.plan_world is not None:  # planned in another world than the judge's
+        blob["plan_world"] = world_content(problem.for_planner(), rule=rule)
     return hashlib.sha256(json.dumps(blob, sort_keys=True).encode()).hexdigest()[:20]
 
 

@@ -73,6 +73,9 @@ class CompareConfig:
     #: trial's worker process, which other processes on the machine cannot take; docs/timing.md
     #: says which planners honour it)
     budget_clock: Literal["wall", "cpu"] = "wall"
+    #: the world the planners plan in (None: the perceived one with perceived grasps, else the
+    #: truth; `plan_world_for`); the judge and the physics always use the truth
+    world: Literal["truth", "perceived"] | None = None
 
 
 def worker_init() -> None:
@@ -137,6 +140,40 @@ def scene_grasps(scene, *, grasps: str, perception=None):
     return [d.grasp for d in perceive_with(scene, setup=perception).detections]
 
 
+#: the worlds planners may plan in: the truth, or one built from the cameras (`perception.world`)
+WORLDS = ("truth", "perceived")
+
+
+def plan_world_for(grasps: str, world: str | None) -> str:
+    """The world planners plan in: as asked, else the perceived one for perceived grasps (a robot
+    plans around what it sees) and the truth for ground-truth grasps."""
+    if world is None:
+        return "perceived" if grasps == "perceived" else "truth"
+    if world not in WORLDS:
+        from scenes.errors import SuiteError
+
+        raise SuiteError(f"unknown planning world {world!r}; allowed: {', '.join(WORLDS)}")
+    if world == "perceived" and grasps != "perceived":
+        from scenes.errors import SuiteError
+
+        raise SuiteError("a perceived planning world needs perceived grasps (--grasps perceived)")
+    return world
+
+
+def scene_task(scene, *, grasps: str, perception=None, world: str | None = None):
+    """The grasps to plan for and the world to plan in: (grasps, `perception.world.PerceivedWorld`
+    or None for the truth). `world` as `plan_world_for`; a perceived world is built from every camera
+    of the spec, through `perception`'s sensor (None: the paper's pipeline on the spec's cameras),
+    the arm at Drake's default (out of the plate's view)."""
+    if plan_world_for(grasps, world) == "truth":
+        return scene_grasps(scene, grasps=grasps, perception=perception), None
+    from perception.pipeline import PerceptionSetup, noise_rng
+    from perception.world import perceive_world
+
+    detections, seen = perceive_world(scene, setup=perception or PerceptionSetup(), rng=noise_rng(scene.seed))
+    return [d.grasp for d in detections], seen
+
+
 def prepare_trials(config: CompareConfig, *, progress=None) -> list[TrialSpec]:
     """One trial per distinct problem and planner (and budget, with `budgets`): the dataset's stored
     problems, or problems of generated scenes (identical problems kept once, each with its
@@ -177,8 +214,8 @@ def _generated_problems(config: CompareConfig, progress):
     seen: set[str] = set()
     for scene_seed in range(config.seed, config.seed + config.scenes):
         scene = generate_scene(spec, seed=scene_seed)
-        grasps = scene_grasps(scene, grasps=config.grasps)
-        for problem in build_problems(scene, grasps, time_limit_s=config.time_limit_s, seed=scene_seed):
+        grasps, looked = scene_task(scene, grasps=config.grasps, world=config.world)
+        for problem in build_problems(scene, grasps, time_limit_s=config.time_limit_s, seed=scene_seed, world=looked):
             meta: dict[str, Any] = {"family": scene.variant, "kind": problem.kind}
             if problem.pre_status is None:
                 pid = problem_id(problem)

@@ -173,15 +173,16 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
     from planners.worlds import collision_world, planning_world
 
     problem = spec.problem
+    planned = problem.for_planner()  # in its plan world (a perceived one) if it has one; judged in the truth
     record = trial_record(spec)
     t_setup = time.perf_counter()
     world = collision_world(problem)  # the judge's (numpy reference)
-    checks = planning_world(problem)  # the planners' (compiled unless SUITE_CHECKER=numpy); compiles here, in set-up
+    checks = planning_world(planned)  # the planners' (compiled unless SUITE_CHECKER=numpy); compiles here, in set-up
     result = None
     try:
         cls = planner_class(spec.planner)
         planner = cls(make_config(cls, spec.planner_config))
-        planner.prepare(problem)  # world-only set-up, outside the clock for every planner alike
+        planner.prepare(planned)  # world-only set-up, outside the clock for every planner alike
     except MemoryError:
         raise
     except Exception as exc:  # a bad config or a planner bug is this trial's error, not the run's
@@ -194,7 +195,7 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
     t0, c0 = time.perf_counter(), time.process_time()
     if result is None:
         try:
-            result = planner.plan(problem)
+            result = planner.plan(planned)
         except MemoryError:
             raise
         except Exception as exc:
@@ -209,10 +210,27 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
     _PLANNED.add(spec.planner)
     record = judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s,
                           planning_cpu_time_s=planning_cpu_time_s)
+    if problem.plan_world is not None:
+        _perceived_verdict(record, problem, planned, result)
     attribution = attribute(record["stats"], planning_time_s, fcl)
     if attribution is not None:
         record["attribution"] = attribution
     return record
+
+
+def _perceived_verdict(record: dict[str, Any], problem, planned, result: PlanResult) -> None:
+    """A trial planned in another world than the judge's: which world each check used, and, for a
+    path the judge rejected for a collision that is free in the planner's world, its
+    perception-induced failure (`stats.perception_induced`: where, what it struck, why)."""
+    from planners.worlds import collision_world
+    from suite.scoring.perception_failure import perception_induced
+
+    record["worlds"] = {"planned": problem.plan_world.source, "judged": "truth", "physics": "truth"}
+    reason = str(record["stats"].get("invalid_reason", ""))
+    if record["status"] == PlanStatus.INVALID_SOLUTION.value and reason.startswith("collision"):
+        found = perception_induced(problem, result.path, collision_world(problem), collision_world(planned))
+        if found is not None:
+            record["stats"]["perception_induced"] = found
 
 
 def attribute(stats: dict[str, Any], planning_time_s: float,

@@ -1,0 +1,435 @@
+"""The perceived collision world: the world a robot plans in when all it knows is its cell's fixed
+parts and what its cameras see.
+
+A `PerceivedWorld` is a `Scene` like the ground truth's, so every planner (the compiled kernels,
+the python-fcl world, the Drake scene of `ik` and `trajopt`, roboplan) plans in it unchanged:
+
+- **Known fixtures**, exact: the table, the plate, the bin and every obstacle of the spec that is
+  part of the cell (walls, shelf, window frame); not the loose objects a generator scatters on the
+  plate (`LOOSE_PREFIXES`: distractors and look-alikes), which the robot must see.
+- **Perceived cans**: a cylinder at each detection's pose, its radius and length grown by
+  `can_padding_m` (the perception's p95 pose error under the sensor: `can_padding_for`). The can
+  being grasped rides in the gripper at its perceived pose.
+- **Everything else seen above the plate** as merged voxel boxes (`voxel_m` cubes): the volume over
+  the plate's footprint, from `floor_clearance_m` above its top to `height_m`, is cut into voxels;
+  a voxel is occupied when a camera's depth point falls in it, or when no camera sees through it
+  (space carving: every space hidden behind or below a seen surface, or never seen, is occupied).
+  Each camera sees through a voxel when its depth at the voxel centre's pixel lies beyond the
+  voxel's far side along that ray by more than `sigma_k` depth sigmas of the sensor. A run of up to
+  `hole_fill_px` pixels with no depth along an image row takes the farther of the depths at its two
+  ends when it is a structured-light projector's shadow (it falls on the farther surface, beside
+  the nearer object on the projector's side, as wide as their disparity jump), else the nearer
+  one (a dropout on an object's edge or face hides what is behind it). Longer gaps stay unseen.
+- **Left out**: points explained by a known fixture (within `sigma_k` depth sigmas) or a perceived
+  can (within its padding, `can_point_margin_m` and the depth tolerance), unseen space within `unseen_clear_m` of a perceived can (its own
+  shadow) unless next to a voxel where something else was seen, and the robot itself at the configuration the frame was
+  taken in (each robot part grown by `robot_margin_m`; a held can is part of the robot).
+- **Boxes and padding**: occupied voxels are merged into boxes; each box reaches as far as what its
+  voxels hold: the bounding box of a voxel's points, or the whole cube where no camera saw in. A
+  box's face on a seen surface is therefore at the surface's points, one on unseen space at the
+  voxel's edge (up to `voxel_m` beyond the object). Seen points are grown by `sigma_k` sensor
+  sigmas (the largest over the volume), unseen cubes not (they already reach past what hides
+  there); the cans by their p95 pose error.
+
+The truth judges: planners see this world, the independent validator and the physics the true one
+(`suite.problems.cycle.build_problems`, `suite.run.trial`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from perception.geometry import back_project_camera, camera_to_world, project
+from scenes.errors import SuiteError
+from scenes.scene import CanPose, HeldCan, Scene
+from scenes.spec import Obstacle, SceneSpec, pose_tuple
+
+#: name prefixes of the objects a scene generator scatters on the plate (not known to the robot)
+LOOSE_PREFIXES = ("distractor_", "hourglass_", "dented_")
+#: the voxel boxes' names in the perceived spec
+VOXEL_PREFIX = "seen_"
+#: the perceived cans' ids start here (never a ground-truth id)
+PERCEIVED_ID_BASE = 1000
+#: seen points are grown by at least this (a perfect sensor's surface still makes a solid box)
+MIN_POINT_PADDING_M = 0.001
+#: voxel boxes' colour (rendering of a perceived world)
+VOXEL_RGBA = (0.55, 0.55, 0.85, 0.6)
+
+
+@dataclasses.dataclass(frozen=True)
+class WorldParams:
+    """How the perceived world is built (see the module docstring).
+
+    Attributes:
+        voxel_m: the voxel's edge, metres.
+        height_m: the top of the volume above the plate's top, metres.
+        floor_clearance_m: the volume starts this far above the plate's top (the plate's own noisy
+            points stay below it); an object lower than this is not seen.
+        sigma_k: the tolerance of a depth, in the sensor's depth sigmas at that depth.
+        can_padding_m: growth of each perceived can's radius and half length (None: the p95 pose
+            error of the pipeline under its sensor, `can_padding_for`).
+        robot_margin_m: points within this of the robot's collision parts are the robot's.
+        can_point_margin_m: points within this (plus the depth tolerance) of a perceived can's
+            padded surface are the can's: a can seen farther off than its p95 error shows its
+            surface outside its padding (a neighbour closer than this to a can is not seen).
+        unseen_clear_m: space no camera saw into within this of a perceived can (beyond its
+            padding) is the can's own shadow, not an obstacle (as a robot's occupancy map is cleared
+            around the objects it models), unless it touches a voxel where something else was seen
+            (the hidden side of that object stays occupied). It must exceed a voxel box's half size
+            and padding plus a held can's margin, or a can lifted from its place starts in its own
+            shadow.
+        hole_fill_px: the longest run of pixels without depth along a row that is filled.
+    """
+
+    voxel_m: float = 0.01
+    height_m: float = 0.30
+    floor_clearance_m: float = 0.006
+    sigma_k: float = 3.0
+    can_padding_m: float | None = None
+    robot_margin_m: float = 0.02
+    can_point_margin_m: float = 0.005
+    unseen_clear_m: float = 0.015
+    hole_fill_px: int = 24
+
+    def __post_init__(self):
+        for name in ("voxel_m", "height_m", "floor_clearance_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise SuiteError(f"perceived world: {name} must be a positive number of metres, got {v}")
+        if self.can_padding_m is not None and not (math.isfinite(self.can_padding_m) and self.can_padding_m >= 0):
+            raise SuiteError(f"perceived world: can padding must be >= 0 m, got {self.can_padding_m}")
+        if self.voxel_m > 0.05:
+            raise SuiteError(f"perceived world: voxel_m {self.voxel_m} m is coarser than a can; allowed up to 0.05")
+
+
+#: p95 xy pose error (metres) measured by `perceive --evaluate` on `clutter` seeds 92000-92019
+#: (docs/perception.md): at most 1.39 mm on clean depth, 2.10 mm under kinect-v1 (either pipeline);
+#: rounded up. A perceived can on the plate is grown by it.
+CAN_PADDING_CLEAN_M = 0.0015
+CAN_PADDING_NOISY_M = 0.0025
+
+
+def can_padding_for(sensor) -> float:
+    """The perceived cans' padding for a sensor model (None: a perfect sensor)."""
+    return CAN_PADDING_CLEAN_M if sensor is None else CAN_PADDING_NOISY_M
+
+
+@dataclasses.dataclass(frozen=True)
+class PerceivedWorld:
+    """A world built from camera frames.
+
+    Attributes:
+        scene: the world as a scene: known fixtures and voxel boxes in its spec's obstacles, the
+            perceived cans (ids from PERCEIVED_ID_BASE) as its cans, the can model grown by the padding.
+        can_of_detection: detection id -> the perceived can's id.
+        voxels: occupied voxels (after what is explained is left out); boxes: voxel boxes.
+        params: how it was built; cameras: the frames it fused; build_time_s: seconds.
+        can_padding_m, voxel_padding_m: the padding of the cans, and of the boxes beyond their cubes.
+    """
+
+    scene: Scene
+    can_of_detection: dict[int, int]
+    voxels: int
+    boxes: int
+    params: WorldParams
+    cameras: tuple[str, ...]
+    build_time_s: float
+    can_padding_m: float
+    voxel_padding_m: float
+
+    def can(self, detection_id: int) -> CanPose:
+        cid = self.can_of_detection[detection_id]
+        return next(c for c in self.scene.cans if c.id == cid)
+
+    def held(self, detection_id: int, X_WG: np.ndarray) -> HeldCan:
+        """The perceived can of a detection as it sits in a gripper closed on it at X_WG."""
+        return HeldCan.from_grasp(self.can(detection_id), X_WG)
+
+    def summary(self) -> dict:
+        return {"world": "perceived", "voxel_m": self.params.voxel_m, "voxels": self.voxels, "boxes": self.boxes,
+                "cans": len(self.scene.cans), "cameras": list(self.cameras),
+                "can_padding_m": self.can_padding_m, "voxel_padding_m": round(self.voxel_padding_m, 6),
+                "build_time_s": round(self.build_time_s, 4)}
+
+
+def fixtures(spec: SceneSpec) -> tuple[Obstacle, ...]:
+    """The spec's obstacles a robot cell knows (everything but the loose objects on the plate)."""
+    return tuple(o for o in spec.extra if not o.name.startswith(LOOSE_PREFIXES))
+
+
+def inside(points: np.ndarray, kind: str, dims, X_WS: np.ndarray, margin_m: float) -> np.ndarray:
+    """Which points (N, 3) lie within `margin_m` of a primitive (box, cylinder, capsule, sphere)
+    at pose X_WS."""
+    p = (points - X_WS[:3, 3]) @ X_WS[:3, :3]
+    if kind == "box":
+        return np.all(np.abs(p) <= np.asarray(dims, float) / 2 + margin_m, axis=1)
+    if kind == "sphere":
+        return np.linalg.norm(p, axis=1) <= dims[0] + margin_m
+    r, length = dims
+    if kind == "cylinder":
+        return (np.hypot(p[:, 0], p[:, 1]) <= r + margin_m) & (np.abs(p[:, 2]) <= length / 2 + margin_m)
+    if kind == "capsule":
+        z = np.clip(p[:, 2], -length / 2, length / 2)
+        return np.hypot(np.hypot(p[:, 0], p[:, 1]), p[:, 2] - z) <= r + margin_m
+    raise ValueError(f"unsupported shape {kind!r}")
+
+
+def fill_row_holes(depth_m: np.ndarray, max_px: int, *, shadow_px_m: float | None = None, slack_px: int = 3) -> np.ndarray:
+    """A copy of a depth image whose runs of at most `max_px` pixels without depth along a row, with
+    depth at both ends, are filled: with the farther end's depth when the run is the projector's
+    shadow of a structured-light camera (projector on the image's +x side: the far surface on the
+    run's left, the nearer object on its right, and the run as wide as the disparity jump
+    `shadow_px_m` * (1/z_near - 1/z_far) pixels within `slack_px`, where `shadow_px_m` is the
+    focal length times the baseline), else with the nearer end's (a dropout on an object's edge or
+    face: what lies behind it stays hidden). Longer runs, and runs open at an end, stay empty."""
+    d = depth_m.astype(np.float64, copy=True)
+    bad = ~np.isfinite(d) & ~np.isposinf(d)
+    if max_px <= 0 or not bad.any():
+        return d
+    cols = np.arange(d.shape[1])
+    for r in np.flatnonzero(bad.any(axis=1)):
+        row, miss = d[r], bad[r]
+        good = np.flatnonzero(~miss)
+        if good.size < 2:
+            continue
+        j = np.searchsorted(good, cols[miss])  # the next good column after each hole pixel
+        ok = (j > 0) & (j < good.size)
+        left, right = good[np.clip(j - 1, 0, good.size - 1)], good[np.clip(j, 0, good.size - 1)]
+        width = right - left - 1
+        ok &= width <= max_px
+        dl, dr = row[left], row[right]
+        fill = np.minimum(dl, dr)
+        if shadow_px_m is not None:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                jump = shadow_px_m * (1.0 / dr - 1.0 / dl)
+            shadow = (dl > dr) & (np.abs(width - jump) <= slack_px)
+            fill = np.where(shadow, dl, fill)
+        row[cols[miss][ok]] = fill[ok]
+    return d
+
+
+def _merge_boxes(occ: np.ndarray) -> list[tuple[tuple[int, int, int], tuple[int, int, int]]]:
+    """Occupied voxels (X, Y, Z bool) as axis-aligned boxes of whole voxels, greedily: the longest
+    run along x, grown along y while the whole row is occupied, then along z while the whole
+    rectangle is. Returns (start index, size in voxels) per box; together they cover exactly `occ`."""
+    left = occ.copy()
+    nx, ny, nz = occ.shape
+    out = []
+    for k in range(nz):
+        for j in range(ny):
+            i = 0
+            while i < nx:
+                if not left[i, j, k]:
+                    i += 1
+                    continue
+                i1 = i
+                while i1 + 1 < nx and left[i1 + 1, j, k]:
+                    i1 += 1
+                j1 = j
+                while j1 + 1 < ny and left[i:i1 + 1, j1 + 1, k].all():
+                    j1 += 1
+                k1 = k
+                while k1 + 1 < nz and left[i:i1 + 1, j:j1 + 1, k1 + 1].all():
+                    k1 += 1
+                left[i:i1 + 1, j:j1 + 1, k:k1 + 1] = False
+                out.append(((i, j, k), (i1 - i + 1, j1 - j + 1, k1 - k + 1)))
+                i = i1 + 1
+    return out
+
+
+def robot_explains(points: np.ndarray, *, spec: SceneSpec, q: np.ndarray | None, held: HeldCan | None,
+                   opening_m: float, margin_m: float) -> np.ndarray:
+    """Which points lie on the robot (its collision parts at `q`, grown by `margin_m`, a held can
+    with them)."""
+    if q is None or len(points) == 0:
+        return np.zeros(len(points), bool)
+    from scenes.fcl_world import robot_parts
+    from scenes.robot_model import load_robot
+
+    robot = load_robot(spec.robot)
+    held_can = None if held is None else (held.X_GC, (spec.can.radius_m, spec.can.height_m))
+    X_WB = robot.link_poses(np.asarray(q, float))
+    hit = np.zeros(len(points), bool)
+    for part in robot_parts(robot, opening_m, held_can):
+        X_WS = X_WB[part.body] @ part.X_BS
+        hit |= inside(points, part.kind, part.dims, X_WS, margin_m)
+    return hit
+
+
+def build_world(
+    spec: SceneSpec,
+    frames: dict,
+    detections,
+    *,
+    seed: int,
+    sensor=None,
+    q_robot: np.ndarray | None = None,
+    held: HeldCan | None = None,
+    gripper_opening_m: float | None = None,
+    params: WorldParams = WorldParams(),
+) -> PerceivedWorld:
+    """The perceived world of sensed frames (camera name -> `CameraImage`, depth NaN where none)
+    and the detections in them (see the module docstring).
+
+    Args:
+        spec: the cell (its fixtures, plate and can model; no loose object is read from it).
+        frames: every camera's frame as the sensor returned it.
+        detections: the cans perceived (`CanDetection`s), each becoming a can of the world.
+        seed: the scene's seed (the world's scene carries it).
+        sensor: the frames' sensor model (`scenes.sensor.SensorSpec`; None: a perfect sensor).
+        q_robot: the arm's joints when the frames were taken (its points are left out; None: the
+            arm is out of view).
+        held: a can in the gripper then (left out with the robot).
+        gripper_opening_m: the fingers' opening then (default: open).
+        params: the builder's settings.
+    """
+    t0 = time.perf_counter()
+    if not frames:
+        raise SuiteError("a perceived world needs at least one camera frame")
+    r, h = spec.can.radius_m, spec.can.height_m
+    pad_c = can_padding_for(sensor) if params.can_padding_m is None else params.can_padding_m
+    cans = tuple(CanPose(PERCEIVED_ID_BASE + i, tuple(float(v) for v in d.p_WC_m), bool(d.lying), float(d.axis_yaw_rad))
+                 for i, d in enumerate(detections))
+    by_det = {d.id: PERCEIVED_ID_BASE + i for i, d in enumerate(detections)}
+    v = params.voxel_m
+    half_diag = v * math.sqrt(3) / 2
+    # the volume over the plate's footprint
+    pc, ps = np.asarray(spec.plate.center_m, float), np.asarray(spec.plate.size_m, float)
+    lo = np.array([pc[0] - ps[0] / 2, pc[1] - ps[1] / 2, spec.plate_top_z_m + params.floor_clearance_m])
+    shape = np.maximum(np.ceil(np.array([ps[0], ps[1], params.height_m - params.floor_clearance_m]) / v).astype(int), 1)
+    idx = np.stack(np.meshgrid(*[np.arange(n) for n in shape], indexing="ij"), axis=-1).reshape(-1, 3)
+    centres = lo + (idx + 0.5) * v
+    known = fixtures(spec) + tuple(Obstacle.from_box(n, b) for n, b in spec.static_boxes().items())
+
+    opening = spec.grasp.open_width_m if gripper_opening_m is None else gripper_opening_m
+
+    def explained(p: np.ndarray, *, fixture_margin: float, can_margin: float) -> np.ndarray:
+        hit = np.zeros(len(p), bool)
+        for o in known:
+            hit |= inside(p, o.shape, o.size_m, o.pose(), fixture_margin)
+        for c in cans:
+            hit |= inside(p, "cylinder", (r + pad_c, h + 2 * pad_c), c.X_WC(), can_margin)
+        hit |= robot_explains(p, spec=spec, q=q_robot, held=held, opening_m=opening, margin_m=params.robot_margin_m)
+        return hit
+
+    # the depth sigma over the volume (the largest any camera has there) sets the depth tolerances
+    sigmas = []
+    for image in frames.values():
+        _, zc = project(np.array([lo, lo + [ps[0], ps[1], params.height_m]]), K=image.K, X_WC=image.X_WC)
+        sigmas.append(0.0 if sensor is None else max(sensor.depth_sigma_at_m(float(abs(z))) for z in zc))
+    max_sigma = max(sigmas)
+    point_tol = params.sigma_k * max_sigma
+    seen_free = np.zeros(len(centres), bool)
+    hit_vox = np.zeros(tuple(shape), bool)
+    flat = lambda k: np.ravel_multi_index(tuple(k.T), tuple(shape))  # noqa: E731
+    pt_lo = np.full((len(centres), 3), np.inf)  # each voxel's points' bounding box
+    pt_hi = np.full((len(centres), 3), -np.inf)
+    for image in frames.values():
+        shadow = (float(image.K[0, 0]) * sensor.baseline_m
+                  if sensor is not None and sensor.kind == "structured-light" else None)
+        depth = fill_row_holes(image.depth_m, params.hole_fill_px, shadow_px_m=shadow)
+        hgt, wid = depth.shape
+        uv, zc = project(centres, K=image.K, X_WC=image.X_WC)
+        u, vv = np.round(uv[:, 0]).astype(int), np.round(uv[:, 1]).astype(int)
+        ok = (zc > 0) & (u >= 0) & (u < wid) & (vv >= 0) & (vv < hgt)
+        d = np.full(len(centres), np.nan)
+        d[ok] = depth[vv[ok], u[ok]]
+        # the voxel's far side along the ray, in depth: (v/2) / max |ray direction| along the ray
+        ray = centres - image.X_WC[:3, 3]
+        dist = np.linalg.norm(ray, axis=1)
+        exit_depth = (v / 2) / np.abs(ray / dist[:, None]).max(axis=1) * np.abs(zc) / dist
+        tol = exit_depth + params.sigma_k * (0.0 if sensor is None else np.vectorize(sensor.depth_sigma_at_m)(zc))
+        with np.errstate(invalid="ignore"):
+            seen_free |= ok & (d > zc + tol)  # inf (nothing within range) sees through
+        # the frame's points in the volume
+        p = camera_to_world(back_project_camera(image.depth_m, K=image.K), image.X_WC).reshape(-1, 3)
+        p = p[np.all(np.isfinite(p), axis=1)]
+        k = np.floor((p - lo) / v).astype(int)
+        in_vol = np.all((k >= 0) & (k < shape), axis=1)
+        p, k = p[in_vol], k[in_vol]
+        keep = ~explained(p, fixture_margin=point_tol, can_margin=point_tol + params.can_point_margin_m)
+        hit_vox[tuple(k[keep].T)] = True
+        np.minimum.at(pt_lo, flat(k[keep]), p[keep])
+        np.maximum.at(pt_hi, flat(k[keep]), p[keep])
+    # unseen space next to a fixture, a can or the robot is theirs (their own shadow); points are not
+    # unseen space beside a can is its own shadow, unless it touches a surface seen there (then it may
+    # be the hidden side of that object: occupied)
+    import cv2
+
+    near_seen = np.stack([cv2.dilate(hit_vox[:, :, k].astype(np.uint8), np.ones((3, 3), np.uint8)) for k in range(shape[2])],
+                         axis=-1).astype(bool)
+    near_seen[:, :, 1:] |= near_seen[:, :, :-1].copy()
+    near_seen[:, :, :-1] |= near_seen[:, :, 1:].copy()
+    shadow = ~near_seen.reshape(-1) & explained(centres, fixture_margin=0.0, can_margin=params.unseen_clear_m)
+    shadow |= explained(centres, fixture_margin=0.0, can_margin=0.0)  # inside a can or a fixture: theirs
+    occ = hit_vox.reshape(-1) | (~seen_free & ~shadow)
+    occ_grid = occ.reshape(tuple(shape))
+    pad_v = max(params.sigma_k * max_sigma, MIN_POINT_PADDING_M)
+    extra = list(fixtures(spec))
+    # What each occupied voxel holds: the bounding box of its points, or the whole cube when no
+    # camera saw into it; a merged box is the bounding box of what its voxels hold (its faces on
+    # seen surfaces are where the points are, not at the voxels' edges).
+    has = hit_vox.reshape(-1)
+    c_lo = np.where(has[:, None], pt_lo - pad_v, centres - v / 2).reshape(*shape, 3)
+    c_hi = np.where(has[:, None], pt_hi + pad_v, centres + v / 2).reshape(*shape, 3)
+    for n, (start, size) in enumerate(_merge_boxes(occ_grid)):
+        cut = tuple(slice(a, a + b) for a, b in zip(start, size))
+        b_lo = c_lo[cut].reshape(-1, 3).min(axis=0)
+        b_hi = c_hi[cut].reshape(-1, 3).max(axis=0)
+        if start[2] == 0 and b_lo[2] < lo[2] + v / 2:  # it stands on the plate (below the volume nothing is seen)
+            b_lo[2] = spec.plate_top_z_m
+        X = np.eye(4)
+        X[:3, 3] = (b_lo + b_hi) / 2
+        extra.append(Obstacle(f"{VOXEL_PREFIX}{n}", "box", tuple(float(s) for s in b_hi - b_lo), pose_tuple(X), VOXEL_RGBA))
+    can = dataclasses.replace(spec.can, radius_m=r + pad_c, height_m=h + 2 * pad_c)
+    # The can in the gripper is where the fingers hold it, not where it was seen: it keeps the
+    # truth's model and margin (the padding is taken back from its margin).
+    grasp = dataclasses.replace(spec.grasp, held_margin_m=max(spec.grasp.held_margin_m - pad_c, 0.0))
+    world_spec = dataclasses.replace(spec, extra=tuple(extra), can=can, grasp=grasp)
+    return PerceivedWorld(
+        scene=Scene(world_spec, seed, cans), can_of_detection=by_det, voxels=int(occ.sum()),
+        boxes=len(extra) - len(fixtures(spec)), params=params, cameras=tuple(frames), build_time_s=time.perf_counter() - t0,
+        can_padding_m=pad_c, voxel_padding_m=pad_v,
+    )
+
+
+def perceive_world(scene: Scene, *, setup, rng: np.random.Generator, images: dict | None = None,
+                   q_robot: np.ndarray | None = None, held: HeldCan | None = None,
+                   gripper_opening_m: float | None = None, params: WorldParams = WorldParams()):
+    """Perceive a scene and build the world its planners plan in: every camera's frame through the
+    setup's sensor (`perception.pipeline.PerceptionSetup`; the spec's cameras' when it names none),
+    the cans detected by its pipeline in the top camera's, and the world of all of them.
+
+    Args:
+        scene: the scene (only rendered: nothing of its truth is read).
+        setup: pipeline, segmentation and sensor.
+        rng: the sensor noise's generator (cameras drawn in the order top, then the spec's others).
+        images: clean frames already rendered (camera name -> CameraImage, every camera); None:
+            rendered here with the arm at `q_robot` (default: Drake's zeros, as `render`).
+        q_robot, held, gripper_opening_m: the robot when the frames were taken (left out of them).
+
+    Returns:
+        (detections, PerceivedWorld).
+    """
+    from perception.observe import sense
+    from perception.pipeline import GRASP_CAMERA, detect
+    from perception.side_view import SIDE_CAMERAS
+    from scenes.render import render
+
+    names = [GRASP_CAMERA] + [n for n in scene.spec.cameras.poses if n != GRASP_CAMERA]
+    if images is None:
+        images = render(scene, cameras=names, q_iiwa=q_robot)
+        if q_robot is None:
+            q_robot = np.zeros(7)
+    sensor = setup.sensor_spec() or scene.spec.cameras.sensor
+    frames = {n: images[n] if sensor is None else sense(images[n], sensor=sensor, rng=rng) for n in names if n in images}
+    side = {n: im for n, im in frames.items() if n in SIDE_CAMERAS and setup.pipeline == "robust"}
+    detections, _, _ = detect(frames[GRASP_CAMERA], scene.spec, params=setup.params(), pipeline=setup.pipeline,
+                              side_images=side)
+    world = build_world(scene.spec, frames, detections, seed=scene.seed, sensor=sensor, q_robot=q_robot, held=held,
+                        gripper_opening_m=gripper_opening_m, params=params)
+    return detections, world
