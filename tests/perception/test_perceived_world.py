@@ -49,17 +49,22 @@ def test_world_holds_the_fixtures_the_cans_seen_and_the_loose_objects_as_boxes(c
     names = [o.name for o in spec.extra]
     assert not any(n.startswith(LOOSE_PREFIXES) for n in names)  # nothing loose is read from the truth
     assert [o for o in spec.extra if not o.name.startswith(VOXEL_PREFIX)] == list(fixtures(scene.spec))
-    assert len(world.scene.cans) == len(detections) == len(scene.cans)
+    assert len(world.scene.cans) == len(detections) >= len(scene.cans) - 1
     boxes = [o for o in spec.extra if o.name.startswith(VOXEL_PREFIX)]
     assert world.boxes == len(boxes) > 0
     plate_top = scene.spec.plate_top_z_m
     for o in scene.spec.extra:  # every distractor above the plate is inside the seen boxes
         p = _samples_inside(o)
         assert _covered(p[p[:, 2] > plate_top + 0.001], boxes).mean() > 0.95, o.name
-    for c in scene.cans:  # a can's space is its own (a neighbour's padded box may graze its side)
-        p = _samples_inside(Obstacle(f"can_{c.id}", "cylinder", (scene.spec.can.radius_m, scene.spec.can.height_m),
+    r = scene.spec.can.radius_m
+    for c in scene.cans:  # a can seen is a can of the world; a can missed is an obstacle like any other
+        p = _samples_inside(Obstacle(f"can_{c.id}", "cylinder", (r, scene.spec.can.height_m),
                                      pose_tuple(c.X_WC()), (1, 0, 0, 1)))
-        assert _covered(p, boxes).mean() < 0.05
+        seen = any(np.hypot(*(np.asarray(d.p_WC_m[:2]) - c.p_WC_m[:2])) < r for d in detections)
+        if seen:  # its space is its own (a neighbour's padded box may graze its side)
+            assert _covered(p, boxes).mean() < 0.05
+        else:
+            assert _covered(p[p[:, 2] > plate_top + 0.001], boxes).mean() > 0.95
     # the perceived cans are grown by the padding; the held can keeps the truth's total margin
     assert spec.can.radius_m == pytest.approx(scene.spec.can.radius_m + world.can_padding_m)
     assert spec.can.radius_m + spec.grasp.held_margin_m == pytest.approx(
