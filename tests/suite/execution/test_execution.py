@@ -126,6 +126,10 @@ def test_reperceive_picks_a_moved_can_from_where_it_really_is():
 
     closed = run_execution(ExecutionJob("rrt", config, actual, "perceived", 5.0, actual.seed, reperceive=True))
     assert closed["cans_in_bin"] == 2, closed
+    # planned in the world the cameras saw, rebuilt after the pick; judged and simulated in the truth
+    assert closed["worlds"] == {"planned": "perceived", "judged": "truth", "physics": "truth"}
+    assert [w["cans"] for w in closed["perceived_worlds"]] == [2, 1]
+    assert closed["perception_induced"] == []
 
 
 def _cli(*args):
