@@ -2,12 +2,13 @@
 by an amount measured on the plate, each can's pose re-fitted robustly, and a confidence that
 refuses what the fits do not support.
 
-1. Noise: the robust spread (1.4826 MAD) of the plate's points about its RANSAC plane. A frame
-   noisier than `max_noise_m` gets no grasps at all (refused, and logged as such): beyond it the
-   fits were not measured to hold.
+1. Noise: the RMS of the plate's depths about a plane fitted to them (`plate_noise_m`; it holds for
+   quantized and correlated noise). A frame noisier than `max_noise_m` gets no grasps at all
+   (refused, and logged as such): beyond it the fits were not measured to hold.
 2. Edge-preserving smoothing: a bilateral filter whose range sigma is `range_sigmas` times the
    measured noise (a can's top and the plate 10 cm below it do not mix; the top's noise averages
-   out over about a hundred pixels).
+   out over about a hundred pixels), after dropped pixels amid valid ones are filled with their
+   neighbourhood's median.
 3. The paper's pipeline (geometric segmentation, normals, Algorithm 2, the can model's checks) on
    the smoothed frame.
 4. Re-fits, each with a confidence:
@@ -22,7 +23,8 @@ refuses what the fits do not support.
    A detection below `min_confidence` is refused (logged), never grasped.
 5. Given the side cameras' frames, an upright detection whose side they see narrower than a
    can's all round at some height (`perception.side_view`: the seed paper's hourglass) is
-   refused as a look-alike.
+   refused as a look-alike. Without them the step is skipped, and logged once per process;
+   `robust-top` (`side_check` off, the top camera alone) skips it by design.
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ import cv2
 import numpy as np
 
 from perception.can_model import top_window
-from perception.crop import roi_mask
+from perception.crop import plate_outline_px
 from perception.geometry import axis_yaw_tls, back_project_camera, camera_to_world, project
 from perception.grasps import CanDetection, FrameAnalysis, PerceptionParams, detect_cans
 from perception.plane import ransac_plane
@@ -49,12 +51,32 @@ log = logging.getLogger(__name__)
 _CROSS = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
 #: angular sectors of an upright can's rim in its confidence (5 degrees each)
 RIM_SECTORS = 72
+#: the plate's noise (`plate_noise_m`): pixels this far inside the plate top's outline; the first inlier
+#: band about its known plane (metres: every object on the plate stands higher); the band about the
+#: fitted plane, in RMS residuals, and at least this many metres; fit rounds; fewest pixels
+PLATE_MARGIN_PX = 4
+PLATE_BAND_M = 0.025
+PLATE_BAND_SIGMAS = 4.0
+PLATE_MIN_BAND_M = 0.001
+PLATE_FIT_ROUNDS = 10
+PLATE_MIN_PIXELS = 500
 #: a lying can's upper-half points lie at least this close to its cylinder (a rendered can's facets)
 LYING_SURFACE_TOL_M = 0.002
 #: bins along a lying can's axis (a neighbour off its end is left out past one empty bin), and the
 #: fraction of the middle's typical count that fills a bin
 LYING_RUN_BIN_M = 0.002
 LYING_RUN_MIN_FRACTION = 0.2
+
+
+#: the messages `_log_once` has logged in this process
+_LOGGED: set[str] = set()
+
+
+def _log_once(key: str, message: str) -> None:
+    """Log `message` (a warning) the first time `key` is seen in this process."""
+    if key not in _LOGGED:
+        _LOGGED.add(key)
+        log.warning(message)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,7 +93,12 @@ class RobustParams:
         min_upright_confidence: an upright can's fitted rim must cover this fraction of its circle.
         min_lying_confidence: a lying can's upper half must span this fraction of its length.
         side_check: refuse an upright detection whose side the side cameras see narrower than a
-            can's (only when their frames are given).
+            can's (only when their frames are given; without them it is off, logged once per
+            process). False: the top camera alone (`perception.pipeline`'s `robust-top`).
+        fill_dropouts: a pixel without depth whose 5x5 neighbourhood mostly has depth takes its
+            median before smoothing (`denoise_depth`): a structured-light sensor's dropouts beside
+            depth edges otherwise leave a can top's outline ragged beyond the can model's rim
+            tolerance (on the tuning seeds under kinect-v1, 3-4% of the cans were lost so).
     """
 
     base: PerceptionParams = PerceptionParams(segmentation="geometric")
@@ -84,31 +111,100 @@ class RobustParams:
     min_upright_confidence: float = 0.5
     min_lying_confidence: float = 0.8
     side_check: bool = True
+    fill_dropouts: bool = True
+
+
+def plate_pixels(image: CameraImage, spec: SceneSpec, *,
+                 margin_px: int = PLATE_MARGIN_PX) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pixels (rows, cols) inside the plate top's outline, `margin_px` in from it, and the depth
+    (metres, along the optical axis) the plate's known plane has at each (the plate is a fixture of
+    the cell, calibrated like the camera; nothing on it is assumed)."""
+    h, w = image.depth_m.shape
+    mask = np.zeros((h, w), np.uint8)
+    cv2.fillConvexPoly(mask, np.round(plate_outline_px(spec, K=image.K, X_WC=image.X_WC)).astype(np.int32), 1)
+    if margin_px > 0:
+        mask = cv2.erode(mask, np.ones((2 * margin_px + 1, 2 * margin_px + 1), np.uint8))
+    rows, cols = np.nonzero(mask)
+    R, t = image.X_WC[:3, :3], image.X_WC[:3, 3]
+    # the plane z_W = plate top in the camera frame: n_C . p_C = d_C; a pixel's ray q = (x, y, 1)
+    # meets it at depth d_C / (n_C . q)
+    n_C, d_C = R.T @ np.array([0.0, 0.0, 1.0]), spec.plate_top_z_m - t[2]
+    q = np.column_stack([(cols - image.K[0, 2]) / image.K[0, 0], (rows - image.K[1, 2]) / image.K[1, 1],
+                         np.ones(rows.size)])
+    with np.errstate(divide="ignore"):
+        return rows, cols, d_C / (q @ n_C)
 
 
 def plate_noise_m(image: CameraImage, spec: SceneSpec, *, rng: np.random.Generator | None = None) -> float:
-    """The depth noise's standard deviation (metres) measured on the plate's footprint: the robust
-    spread (1.4826 MAD / sqrt 2) of the differences between horizontally adjacent depth pixels
-    there (the surfaces are smooth over one pixel; edges are outliers). It needs no plane fit,
-    which a dense plate can lead astray. NaN with too few pixels. `rng` is unused (kept for a
-    sampled variant)."""
-    roi = roi_mask(spec, K=image.K, X_WC=image.X_WC, shape=image.depth_m.shape)
-    d = image.depth_m.astype(np.float64)
-    both = roi[:, 1:] & roi[:, :-1] & np.isfinite(d[:, 1:]) & np.isfinite(d[:, :-1])
-    diff = (d[:, 1:] - d[:, :-1])[both]
-    if diff.size < 100:
+    """The depth noise's standard deviation (metres) measured on the plate: the RMS of the plate's
+    depths about a plane fitted to them.
+
+    The plate's pixels (`plate_pixels`) within `PLATE_BAND_M` of its known plane (every object on
+    it stands higher) seed the fit; the plane (linear in inverse depth over the pixel grid, as a
+    plane seen by a pinhole camera is) is then fitted by least squares to the pixels within
+    `PLATE_BAND_SIGMAS` of the RMS residual of the last fit, until the set stops changing (a
+    trimmed fit: an object's foot or a noise outlier does not pull it). The residual is in depth,
+    so the figure is the RMS of measured less true depth over the plate, which is how the true
+    sigma is defined. Unlike a spread of neighbouring pixels' differences it survives a
+    quantized sensor (most neighbours of a structured-light depth image differ by exactly 0) and
+    correlated noise (neighbours share their error). NaN with fewer than `PLATE_MIN_PIXELS`
+    pixels. `rng` is unused (kept for a sampled variant)."""
+    rows, cols, z_plane = plate_pixels(image, spec)
+    z = image.depth_m[rows, cols].astype(np.float64)
+    ok = np.isfinite(z) & (z > 0) & np.isfinite(z_plane)
+    z = np.where(ok, z, np.nan)
+    with np.errstate(invalid="ignore"):
+        inl = ok & (np.abs(z - z_plane) < PLATE_BAND_M)
+    if inl.sum() < PLATE_MIN_PIXELS:
         return float("nan")
-    return float(1.4826 * np.median(np.abs(diff - np.median(diff))) / math.sqrt(2.0))
+    A = np.column_stack([(cols - image.K[0, 2]) / image.K[0, 0], (rows - image.K[1, 2]) / image.K[1, 1],
+                         np.ones(rows.size)])
+    band, sigma = PLATE_BAND_M, float("nan")
+    for _ in range(PLATE_FIT_ROUNDS):
+        coef, *_ = np.linalg.lstsq(A[inl], 1.0 / z[inl], rcond=None)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            resid = z - 1.0 / (A @ coef)
+        sigma = untruncated_sigma(float(np.sqrt(np.mean(resid[inl] ** 2))), band_m=band)
+        band = min(max(PLATE_BAND_SIGMAS * sigma, PLATE_MIN_BAND_M), PLATE_BAND_M)
+        with np.errstate(invalid="ignore"):
+            nxt = ok & (np.abs(resid) < band)
+        if nxt.sum() < PLATE_MIN_PIXELS or np.array_equal(nxt, inl):
+            break
+        inl = nxt
+    return sigma
 
 
-def denoise_depth(depth_m: np.ndarray, *, sigma_m: float, d_px: int, sigma_space_px: float, range_sigmas: float) -> np.ndarray:
-    """Edge-preserving smoothing (bilateral) of a depth image; pixels without depth stay NaN."""
+def untruncated_sigma(rms_m: float, *, band_m: float) -> float:
+    """The sigma of a zero-mean Gaussian whose samples within +-`band_m` have the RMS `rms_m` (the
+    band cuts the tails: at 4 sigmas the RMS is 0.9993 sigma, at 2.5 sigmas 0.955). Infinite when
+    the samples fill the band as evenly as a uniform distribution or more."""
+    if not rms_m > 0:
+        return rms_m
+    if rms_m >= band_m / math.sqrt(3.0):
+        return float("inf")
+    sigma = rms_m
+    for _ in range(50):
+        k = band_m / sigma
+        phi = math.exp(-0.5 * k * k) / math.sqrt(2.0 * math.pi)
+        ratio = math.sqrt(max(1.0 - 2.0 * k * phi / math.erf(k / math.sqrt(2.0)), 1e-12))
+        nxt = rms_m / ratio
+        if abs(nxt - sigma) < 1e-9 * nxt:
+            return nxt
+        sigma = nxt
+    return sigma
+
+
+def denoise_depth(depth_m: np.ndarray, *, sigma_m: float, d_px: int, sigma_space_px: float, range_sigmas: float,
+                  fill_dropouts: bool = True) -> np.ndarray:
+    """Edge-preserving smoothing (bilateral) of a depth image. A pixel without depth stays NaN,
+    unless `fill_dropouts` and most of its 5x5 neighbourhood has depth: it then takes their median
+    (one surface's depth, never a mix of two across an edge)."""
     valid = np.isfinite(depth_m)
     d = np.where(valid, depth_m, 0.0).astype(np.float32)
     fill = cv2.medianBlur(d, 5)
     d = np.where(valid, d, fill)
     out = cv2.bilateralFilter(d, d_px, range_sigmas * sigma_m, sigma_space_px)
-    out[~valid] = np.nan
+    out[~valid & ~(fill > 0 if fill_dropouts else False)] = np.nan
     return out
 
 
@@ -262,7 +358,8 @@ def detect_cans_robust(
     measured = plate_noise_m(image, spec, rng=rng)
     sigma = max(measured if measured == measured else params.min_noise_m, params.min_noise_m)
     depth = denoise_depth(image.depth_m, sigma_m=sigma, d_px=params.bilateral_px,
-                          sigma_space_px=params.bilateral_sigma_space_px, range_sigmas=params.bilateral_range_sigmas)
+                          sigma_space_px=params.bilateral_sigma_space_px, range_sigmas=params.bilateral_range_sigmas,
+                          fill_dropouts=params.fill_dropouts)
     dets, fa = detect_cans(dataclasses.replace(image, depth_m=depth), spec, params.base)
     if not measured <= params.max_noise_m:
         log.warning("plate depth noise %.1f mm is above the robust pipeline's limit %.1f mm: all %d detections "
@@ -270,6 +367,9 @@ def detect_cans_robust(
         return [], fa, measured
     r, h = spec.can.radius_m, spec.can.height_m
     side_points = world_points(side_images) if side_images and params.side_check else {}
+    if params.side_check and not side_images:
+        _log_once("no-side-camera", "robust pipeline: no side camera frame given; its side check (look-alikes) is "
+                  "off, so it runs top-only (as `robust-top`)")
     out: list[CanDetection] = []
     for det in dets:
         if det.lying:

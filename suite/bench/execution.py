@@ -18,7 +18,7 @@ import argparse
 import json
 import time
 
-from suite.cli.args import nonneg_float, nonneg_int, positive_int
+from suite.cli.args import add_noise_arguments, nonneg_float, nonneg_int, positive_int
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,9 +36,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--depth-noise-m", type=nonneg_float, default=0.0,
                    help="perceived grasps: Gaussian depth noise sigma in metres, 1%% of pixels dropped, instead of "
                         "--sensor (default 0)")
+    add_noise_arguments(p)
     p.add_argument("--pipeline", default="paper", metavar="LIST",
-                   help="perceived grasps: perception pipelines, each its own grasp source: paper, robust or "
-                        "paper,robust (default paper)")
+                   help="perceived grasps: perception pipelines, each its own grasp source: paper, robust, "
+                        "robust-top, or a list such as paper,robust (default paper)")
     p.add_argument("--segmentation", default="color", metavar="NAME",
                    help="perceived grasps: color (the paper's HSV rule, default) or geometric")
     p.add_argument("--worlds", default="perceived", metavar="LIST",
@@ -59,12 +60,13 @@ def perception_setups(args: argparse.Namespace) -> list:
     if len(set(names)) < len(names):
         raise SuiteError(f"--pipeline {args.pipeline!r} names a pipeline twice")
     return [PerceptionSetup(pipeline=n, segmentation=args.segmentation, sensor=args.sensor or None,
-                            depth_noise_m=args.depth_noise_m) for n in names]
+                            depth_noise_m=args.depth_noise_m, correlation_px=args.noise_correlation_px,
+                            noise_scale=args.noise_scale) for n in names]
 
 
 def source_label(grasps: str, setup, world: str = "truth") -> str:
-    """A source's name in the printed tables: `truth grasps` or `perceived grasps (robust, kinect-v1),
-    perceived world`."""
+    """A source's name in the printed tables: `truth grasps` or `perceived grasps (robust (top, front,
+    back), kinect-v1), perceived world`."""
     return "truth grasps" if setup is None else f"{grasps} grasps ({setup.label()}), {world} world"
 
 

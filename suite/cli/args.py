@@ -45,6 +45,16 @@ def add_scene_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--can-color", default=None, metavar="R,G,B", help="can colour, three values in [0, 1] (default: the spec's red)")
 
 
+def add_noise_arguments(p: argparse.ArgumentParser) -> None:
+    """--noise-correlation-px and --noise-scale: the sensor model's noise, correlated and scaled
+    (`perception.pipeline.PerceptionSetup`; they need --sensor or --depth-noise-m)."""
+    p.add_argument("--noise-correlation-px", type=nonneg_float, default=0.0, metavar="PX",
+                   help="the sensor's depth noise correlated over PX pixels (its autocorrelation falls to 1/e there; "
+                        "default 0: independent per pixel); needs --sensor or --depth-noise-m")
+    p.add_argument("--noise-scale", type=positive_float, default=1.0, metavar="K",
+                   help="the sensor's depth noise sigma times K (default 1); needs --sensor or --depth-noise-m")
+
+
 def add_planning_arguments(p: argparse.ArgumentParser) -> None:
     """--planner, the scene arguments, --grasps and --time-limit-s (one scene, one planner)."""
     p.add_argument("--planner", required=True, help="planner name (e.g. ik, rrt, trajopt)")

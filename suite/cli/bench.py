@@ -10,6 +10,7 @@ TARGETS = {
     "collision": "suite.bench.collision",
     "perception": "suite.bench.perception",
     "lookalike": "suite.bench.lookalike",
+    "noise-estimate": "suite.bench.noise_estimate",
     "planners": "suite.bench.planners",
     "compare": "suite.bench.compare",
     "execution": "suite.bench.execution",

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from scenes.sensor import SENSOR_PRESETS
-from suite.cli.args import add_scene_arguments, nonneg_float, positive_int, scene_from_args, spec_from_args
+from suite.cli.args import add_noise_arguments, add_scene_arguments, nonneg_float, positive_int, scene_from_args, spec_from_args
 
 if TYPE_CHECKING:
     from perception.evaluate import SceneMatch
@@ -30,12 +30,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="Gaussian depth noise sigma in metres, with 1%% of depth pixels dropped (default 0)")
     p.add_argument("--segmentation", choices=("color", "geometric"), default="color",
                    help="color: the paper's HSV rule (default); geometric: colour-free RANSAC plane removal")
-    p.add_argument("--pipeline", choices=("paper", "robust"), default="paper",
-                   help="paper: the seed paper's (default); robust: denoised depth, robust fits and a confidence "
-                        "that refuses unsupported detections (docs/perception.md)")
+    p.add_argument("--pipeline", choices=("paper", "robust", "robust-top"), default="paper",
+                   help="paper: the seed paper's, top camera (default); robust: denoised depth, robust fits and a "
+                        "confidence that refuses unsupported detections, top camera and the side cameras for its "
+                        "side check (docs/perception.md); robust-top: the robust pipeline on the top camera alone")
     p.add_argument("--sensor", choices=sorted(SENSOR_PRESETS), default=None,
                    help="the cameras' sensor model (scenes/sensor.py): kinect-v1 is Khoshelham & Elberink's "
                         "structured-light calibration (default: the spec's, a perfect sensor)")
+    add_noise_arguments(p)
     p.add_argument("--sweep", metavar="DIR",
                    help="with --evaluate --scenes N: every pipeline at every noise level of the sweep "
                         "(Gaussian and structured-light), one JSON per run and noise_sweep.png in DIR")
@@ -53,13 +55,57 @@ def _params(args: argparse.Namespace):
     return PerceptionParams(segmentation=args.segmentation)
 
 
-def _sensor(args: argparse.Namespace):
-    """The sensor named by --sensor (None: the spec's, or --depth-noise-m's Gaussian)."""
+def _setup(args: argparse.Namespace):
+    """The `PerceptionSetup` of the arguments (raises `SuiteError` naming a bad value)."""
+    from perception.pipeline import PerceptionSetup
     from scenes.errors import SuiteError
 
     if args.sensor is not None and args.depth_noise_m > 0:
         raise SuiteError(f"--sensor {args.sensor} cannot go with --depth-noise-m {args.depth_noise_m}: choose one sensor model")
-    return SENSOR_PRESETS[args.sensor] if args.sensor else None
+    corr, scale = getattr(args, "noise_correlation_px", 0.0), getattr(args, "noise_scale", 1.0)
+    if (corr > 0 or scale != 1) and args.sensor is None and not args.depth_noise_m > 0:
+        raise SuiteError(f"--noise-correlation-px {corr:g} and --noise-scale {scale:g} need a sensor model: "
+                         "--sensor NAME or --depth-noise-m M")
+    return PerceptionSetup(pipeline=args.pipeline, segmentation=args.segmentation, sensor=args.sensor,
+                           depth_noise_m=args.depth_noise_m, correlation_px=corr, noise_scale=scale)
+
+
+def _sensor(args: argparse.Namespace):
+    """The sensor of the arguments: --sensor or --depth-noise-m's Gaussian, correlated and scaled as
+    --noise-correlation-px and --noise-scale say (None: the spec's)."""
+    return _setup(args).sensor_spec()
+
+
+def _sensor_fields(args: argparse.Namespace) -> dict:
+    """The run's sensor in an evaluation's JSON: its name, and its noise's correlation and scale."""
+    setup = _setup(args)
+    if setup.sensor_spec() is None:
+        return {}
+    return {**({"sensor": args.sensor} if args.sensor else {}), "noise_correlation_px": setup.correlation_px,
+            "noise_scale": setup.noise_scale}
+
+
+#: the code an evaluation runs: its JSON names HEAD, "+dirty" when a tracked file of these differs
+#: from it (other files of a shared checkout do not change what it computes)
+CODE_PATHS = ("perception", "scenes", "suite/cli/perceive.py", "suite/cli/args.py")
+
+
+def code_commit() -> str | None:
+    """HEAD, with "+dirty" when a tracked file of `CODE_PATHS` differs from it (None outside git)."""
+    import subprocess
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parents[2]
+    try:
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5,
+                              check=False).stdout.strip()
+        changed = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", *CODE_PATHS], cwd=here,
+                                 capture_output=True, text=True, timeout=10, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if not head:
+        return None
+    return head + "+dirty" if changed.returncode == 0 and changed.stdout.strip() else head
 
 
 def _scene_record(seed: int, m: SceneMatch) -> dict:
@@ -141,12 +187,14 @@ def _run_many(args: argparse.Namespace) -> int:
     half a can radius of a distractor's footprint is a grasp on that distractor.
     """
     from perception.evaluate import aggregate, lookalike_lines, match_lookalikes, match_scene
-    from perception.pipeline import perceive
-    from scenes.generate import generate_scene
+    from perception.pipeline import perceive, side_cameras
     from scenes.errors import SuiteError
+    from scenes.generate import generate_scene
 
+    commit = code_commit()  # before the run: the code imported is the code of this moment
     spec = spec_from_args(args)
     sensor = _sensor(args)
+    cameras = ("top",) + tuple(c for c in side_cameras(args.pipeline) if c in spec.cameras.poses)
     matches, records, proc_s, render_s, skipped, looks = [], [], [], [], [], []
     seed = args.seed - 1
     while len(matches) < args.scenes:
@@ -166,7 +214,8 @@ def _run_many(args: argparse.Namespace) -> int:
         matches.append(m)
         looks.append(match_lookalikes(res.detections, scene))
         records.append({**_scene_record(seed, m), "hourglass_grasps": looks[-1].hourglass_grasps,
-                        "dented_grasped": len(looks[-1].dented_xy_error_m)})
+                        "dented_grasped": len(looks[-1].dented_xy_error_m),
+                        **({} if res.plate_noise_m is None else {"plate_noise_m": round(res.plate_noise_m, 6)})})
         proc_s.append(res.process_time_s)
         render_s.append(res.render_time_s)
         missed = m.n_truth - len(m.pairs)
@@ -180,13 +229,13 @@ def _run_many(args: argparse.Namespace) -> int:
         print(json.dumps({"variant": spec.variant, "seeds": [args.seed, seed],
                           "depth_noise_m": args.depth_noise_m, "segmentation": args.segmentation,
                           **({"pipeline": args.pipeline} if args.pipeline != "paper" else {}),
-                          **({"sensor": args.sensor} if args.sensor else {}), "skipped_seeds": skipped, "evaluation": acc.to_json(),
+                          "cameras": list(cameras), **_sensor_fields(args), "git_commit": commit, "skipped_seeds": skipped,
+                          "evaluation": acc.to_json(),
                           **({"lookalikes": lookalike_lines(looks)} if lookalike_lines(looks) else {}), "timing_s": timing,
                           "scenes": records}))
         return 0
-    print(f"variant {spec.variant}, seeds {args.seed}..{seed}, "
-          f"{'sensor ' + args.sensor if args.sensor else f'depth noise {args.depth_noise_m} m'}, "
-          f"{args.segmentation} segmentation, {args.pipeline} pipeline" + (f", skipped seeds (no scene) {skipped}" if skipped else ""))
+    print(f"variant {spec.variant}, seeds {args.seed}..{seed}, {_setup(args).label()}"
+          + (f", skipped seeds (no scene) {skipped}" if skipped else ""))
     for line in acc.lines() + lookalike_lines(looks):
         print("  " + line)
     for rec in records:

@@ -36,13 +36,15 @@ def test_sensor_and_pipelines_parse_to_one_grasp_source_each():
     setups = perception_setups(_args("--sensor", "kinect-v1", "--pipeline", "robust,paper"))
     assert [s.pipeline for s in setups] == ["robust", "paper"]
     assert all(s.sensor == "kinect-v1" and s.sensor_spec().kind == "structured-light" for s in setups)
-    assert source_label("perceived", setups[0], "perceived") == "perceived grasps (robust, kinect-v1), perceived world"
+    assert source_label("perceived", setups[0], "perceived") == ("perceived grasps (robust (top, front, back), kinect-v1), "
+                                                                 "perceived world")
     assert source_label("truth", None) == "truth grasps"
     (gauss,) = perception_setups(_args("--depth-noise-m", "0.003", "--segmentation", "geometric"))
     spec = gauss.sensor_spec()
     assert spec.kind == "gaussian" and spec.depth_sigma_m == 0.003 and spec.drop_fraction == 0.01
-    assert gauss.label() == "paper, geometric, Gaussian 3 mm"
-    assert gauss.to_json() == {"pipeline": "paper", "segmentation": "geometric", "sensor": None, "depth_noise_m": 0.003}
+    assert gauss.label() == "paper (top), geometric, Gaussian 3 mm"
+    assert gauss.to_json() == {"pipeline": "paper", "segmentation": "geometric", "sensor": None, "depth_noise_m": 0.003,
+                               "correlation_px": 0.0, "noise_scale": 1.0}
 
 
 def test_worlds_parse_and_a_bad_one_is_named():
