@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import sys
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -229,7 +230,8 @@ def _run_many(args: argparse.Namespace) -> int:
         print(json.dumps({"variant": spec.variant, "seeds": [args.seed, seed],
                           "depth_noise_m": args.depth_noise_m, "segmentation": args.segmentation,
                           **({"pipeline": args.pipeline} if args.pipeline != "paper" else {}),
-                          "cameras": list(cameras), **_sensor_fields(args), "git_commit": commit, "skipped_seeds": skipped,
+                          "cameras": list(cameras), **_sensor_fields(args), "git_commit": commit,
+                          "command": " ".join(["python -m suite", *sys.argv[1:]]), "skipped_seeds": skipped,
                           "evaluation": acc.to_json(),
                           **({"lookalikes": lookalike_lines(looks)} if lookalike_lines(looks) else {}), "timing_s": timing,
                           "scenes": records}))
