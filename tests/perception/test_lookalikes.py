@@ -70,6 +70,16 @@ def test_the_side_profile_refuses_a_side_narrow_all_round_not_a_one_sided_dent(s
     assert hourglass.waist_m == pytest.approx(0.8 * r, abs=0.001) and hourglass.waist_height == pytest.approx(0.45)
     assert looks_alike(hourglass, radius_m=r)
     assert dent.waist_m > r - 0.001 and not looks_alike(dent, radius_m=r)  # its far side reaches r
+    # a can whose top fit is 2.5 mm off, towards the only camera that sees its side: about the top's
+    # axis it looks 2.5 mm narrow; about the side's own axis it is a can
+    one_side = {"front": _side_points(lambda f, az: r, centre=(0.6, -0.1), plate_z=z0, view_deg=(0.0,))}
+    off = side_profile((0.6025, -0.1), one_side, spec)
+    assert off.axis == "side" and off.axis_xy_m == pytest.approx((0.6, -0.1), abs=2e-4)
+    assert off.waist_m == pytest.approx(r, abs=3e-4) and not looks_alike(off, radius_m=r)
+    # an hourglass seen from one side: its bands stay concentric, the refit cannot widen it
+    hg_one = {"front": _side_points(lambda f, az: r * (1 - 0.2 * max(0.0, 1 - abs(f - 0.5) / 0.4)), centre=(0.6, -0.1),
+                                    plate_z=z0, view_deg=(0.0,))}
+    assert looks_alike(side_profile((0.6015, -0.1), hg_one, spec), radius_m=r)
     unseen = SideProfile((), 0, (float("nan"),) * (len(BAND_EDGES) - 1))
     assert not looks_alike(unseen, radius_m=r)  # nobody sees the side: the top view cannot tell
     assert looks_alike(SideProfile(("back",), 100, (r, r - SIDE_TOLERANCE_M - 1e-4)), radius_m=r)
