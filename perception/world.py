@@ -27,9 +27,10 @@ the python-fcl world, the Drake scene of `ik` and `trajopt`, roboplan) plans in 
 - **Boxes and padding**: occupied voxels are merged into boxes; each box reaches as far as what its
   voxels hold: the bounding box of a voxel's points, or the whole cube where no camera saw in. A
   box's face on a seen surface is therefore at the surface's points, one on unseen space at the
-  voxel's edge (up to `voxel_m` beyond the object). Seen points are grown by `sigma_k` sensor
-  sigmas (the largest over the volume), unseen cubes not (they already reach past what hides
-  there); the cans by their p95 pose error.
+  voxel's edge (up to `voxel_m` beyond the object); a seen voxel also reaches the occupied voxels
+  beside it, so an object stays solid behind its seen surface. Seen points are grown by `point_sigmas`
+  sensor sigmas at their depth (at least 1 mm), unseen cubes not (they already reach past what
+  hides there); the cans by their p95 pose error.
 
 The truth judges: planners see this world, the independent validator and the physics the true one
 (`suite.problems.cycle.build_problems`, `suite.run.trial`).
@@ -69,7 +70,11 @@ class WorldParams:
         height_m: the top of the volume above the plate's top, metres.
         floor_clearance_m: the volume starts this far above the plate's top (the plate's own noisy
             points stay below it); an object lower than this is not seen.
-        sigma_k: the tolerance of a depth, in the sensor's depth sigmas at that depth.
+        sigma_k: the tolerance of a depth, in the sensor's depth sigmas at that depth (free space,
+            and points that are a fixture's or a can's).
+        point_sigmas: each seen point is grown by this many depth sigmas at its own depth: a
+            voxel's points scatter to both sides of the surface, so their bounding box already
+            reaches past it by about their largest deviation.
         can_padding_m: growth of each perceived can's radius and half length (None: the p95 pose
             error of the pipeline under its sensor, `can_padding_for`).
         robot_margin_m: points within this of the robot's collision parts are the robot's.
@@ -89,6 +94,7 @@ class WorldParams:
     height_m: float = 0.30
     floor_clearance_m: float = 0.006
     sigma_k: float = 3.0
+    point_sigmas: float = 1.0
     can_padding_m: float | None = None
     robot_margin_m: float = 0.02
     can_point_margin_m: float = 0.005
@@ -323,6 +329,7 @@ def build_world(
         sigmas.append(0.0 if sensor is None else max(sensor.depth_sigma_at_m(float(abs(z))) for z in zc))
     max_sigma = max(sigmas)
     point_tol = params.sigma_k * max_sigma
+    pad_seen: list[float] = []  # the largest growth of a seen point, per camera
     seen_free = np.zeros(len(centres), bool)
     hit_vox = np.zeros(tuple(shape), bool)
     flat = lambda k: np.ravel_multi_index(tuple(k.T), tuple(shape))  # noqa: E731
@@ -353,8 +360,13 @@ def build_world(
         p, k = p[in_vol], k[in_vol]
         keep = ~explained(p, fixture_margin=point_tol, can_margin=point_tol + params.can_point_margin_m)
         hit_vox[tuple(k[keep].T)] = True
-        np.minimum.at(pt_lo, flat(k[keep]), p[keep])
-        np.maximum.at(pt_hi, flat(k[keep]), p[keep])
+        # each point grown by `point_sigmas` of its own depth's sigma (at least MIN_POINT_PADDING_M)
+        zp = (p[keep] - image.X_WC[:3, 3]) @ image.X_WC[:3, 2]
+        grow = np.maximum(params.point_sigmas * (np.zeros(len(zp)) if sensor is None or not len(zp) else
+                                                 np.vectorize(sensor.depth_sigma_at_m)(zp)), MIN_POINT_PADDING_M)
+        np.minimum.at(pt_lo, flat(k[keep]), p[keep] - grow[:, None])
+        np.maximum.at(pt_hi, flat(k[keep]), p[keep] + grow[:, None])
+        pad_seen.append(float(grow.max()) if len(grow) else 0.0)
     # unseen space next to a fixture, a can or the robot is theirs (their own shadow); points are not
     # unseen space beside a can is its own shadow, unless it touches a surface seen there (then it may
     # be the hidden side of that object: occupied)
@@ -365,17 +377,31 @@ def build_world(
     near_seen[:, :, 1:] |= near_seen[:, :, :-1].copy()
     near_seen[:, :, :-1] |= near_seen[:, :, 1:].copy()
     shadow = ~near_seen.reshape(-1) & explained(centres, fixture_margin=0.0, can_margin=params.unseen_clear_m)
-    shadow |= explained(centres, fixture_margin=0.0, can_margin=0.0)  # inside a can or a fixture: theirs
+    # mostly inside a can or a fixture (its centre within half a voxel of it): theirs
+    shadow |= explained(centres, fixture_margin=0.0, can_margin=v / 2)
     occ = hit_vox.reshape(-1) | (~seen_free & ~shadow)
     occ_grid = occ.reshape(tuple(shape))
-    pad_v = max(params.sigma_k * max_sigma, MIN_POINT_PADDING_M)
+    pad_v = max(pad_seen, default=MIN_POINT_PADDING_M)
     extra = list(fixtures(spec))
     # What each occupied voxel holds: the bounding box of its points, or the whole cube when no
     # camera saw into it; a merged box is the bounding box of what its voxels hold (its faces on
     # seen surfaces are where the points are, not at the voxels' edges).
     has = hit_vox.reshape(-1)
-    c_lo = np.where(has[:, None], pt_lo - pad_v, centres - v / 2).reshape(*shape, 3)
-    c_hi = np.where(has[:, None], pt_hi + pad_v, centres + v / 2).reshape(*shape, 3)
+    c_lo = np.where(has[:, None], pt_lo, centres - v / 2).reshape(*shape, 3)
+    c_hi = np.where(has[:, None], pt_hi, centres + v / 2).reshape(*shape, 3)
+    # a seen voxel reaches its occupied neighbours (the object stays solid: no hollow behind its
+    # surface for a link to cross between two checked states); only faces on free space are tight
+    v_lo, v_hi = (centres - v / 2).reshape(*shape, 3), (centres + v / 2).reshape(*shape, 3)
+    for a in range(3):
+        before = np.zeros(tuple(shape), bool)
+        after = np.zeros(tuple(shape), bool)
+        idx_b = [slice(None)] * 3
+        idx_a = [slice(None)] * 3
+        idx_b[a], idx_a[a] = slice(1, None), slice(None, -1)
+        before[tuple(idx_b)] = occ_grid[tuple(idx_a)]  # the neighbour at -a is occupied
+        after[tuple(idx_a)] = occ_grid[tuple(idx_b)]  # the neighbour at +a is occupied
+        c_lo[..., a] = np.where(before, np.minimum(c_lo[..., a], v_lo[..., a]), c_lo[..., a])
+        c_hi[..., a] = np.where(after, np.maximum(c_hi[..., a], v_hi[..., a]), c_hi[..., a])
     for n, (start, size) in enumerate(_merge_boxes(occ_grid)):
         cut = tuple(slice(a, a + b) for a, b in zip(start, size))
         b_lo = c_lo[cut].reshape(-1, 3).min(axis=0)
