@@ -149,4 +149,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"\n{variant}: {source_label(grasps, setup, world)}, "
                   "cans in the bin per scene (paired against truth grasps in the true world):")
             print("\n".join(paired_lines(base, other, planners=planners)))
+            if world == "perceived" and "truth" in worlds:  # the world's own share: same grasps, same order
+                same = _source_of({"grasps": grasps, "perception": setup.to_json(), "worlds": {"planned": "truth"}})
+                mid = [r for r in records if r["variant"] == variant and _source_of(r) == same]
+                print(f"\n{variant}: {source_label(grasps, setup, world)}, paired against the same grasps "
+                      "in the true world:")
+                print("\n".join(paired_lines(mid, other, planners=planners)))
     return 0
