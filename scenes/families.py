@@ -16,7 +16,8 @@ for feasibility (waypoints reachable by collision-aware IK; redrawn otherwise) a
 - `lookalike`: clutter's draw, then the seed paper's look-alikes (`scenes.lookalikes`): red
   hourglasses with a can's radius and height, and dented cans, all obstacles in physics. The
   evaluation counts a dented can as a can (`perception.evaluate.truth_cans`) and a grasped
-  hourglass as a false detection.
+  hourglass as a false detection. The `lookalike-dents` variant has dented cans only, half of them
+  lying with their dents facing any way (`lookalike`'s lying dents face up).
 """
 
 from __future__ import annotations
@@ -292,9 +293,11 @@ def _draw_lookalike(ranges: LookalikeRanges, spec: SceneSpec, rng: np.random.Gen
         if kind == "hourglass":
             extra += la.hourglass(i, p_xy_m=p, plate_top_z_m=top, radius_m=r, height_m=h, color_rgba=spec.can.color_rgba,
                                   waist_fraction=ranges.hourglass_waist)
-        elif lying:  # the dent faces up, within 60 degrees (what the top camera sees of it)
+        elif lying:  # the dent faces up, within 60 degrees (what the top camera sees of it), or any way
             X = la.lying_frame(p_xy_m=p, yaw_rad=yaw, plate_top_z_m=top, radius_m=r, roll_rad=0.0)
-            extra += la.dented_can(i, X_WC=X, dent_dir_rad=math.pi + float(rng.uniform(-1.0, 1.0)) * math.pi / 3,
+            u = float(rng.uniform(-1.0, 1.0))
+            turn = u * math.pi / 3 if ranges.lying_dent == "up" else u * math.pi
+            extra += la.dented_can(i, X_WC=X, dent_dir_rad=math.pi + turn,
                                    band_center_m=band, radius_m=r, height_m=h, color_rgba=spec.can.color_rgba)
         else:
             X = _rz(0.0, (p[0], p[1], top + h / 2))

@@ -6,7 +6,7 @@ Each family's generator (in `scenes.families`) draws a concrete station within t
 from __future__ import annotations
 
 import dataclasses
-from typing import Annotated, Any, ClassVar
+from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import Field
 
@@ -109,11 +109,14 @@ class LookalikeRanges(ClutterRanges):
     """Clutter's plate with the seed paper's look-alikes (`scenes.lookalikes`): red hourglasses that
     match a can from above, and dented cans (upright or lying, as the cans are). `hourglass_waist`
     is the hourglasses' waist over the can's radius (a value, not a range: it draws nothing, so a
-    scene's draw is the same at any waist)."""
+    scene's draw is the same at any waist). `lying_dent` is where a lying dented can's dent faces:
+    `up` (within 60 degrees of it, what the top camera sees) or `any` (any turn about its axis:
+    up, sideways or down); both draw the same numbers."""
 
     hourglasses: count_range_within(0, 6) = (1, 2)
     dented: count_range_within(0, 6) = (1, 2)
     hourglass_waist: within(0.05, 1.0) = 0.55
+    lying_dent: Literal["up", "any"] = "up"
     generator: ClassVar[str] = "lookalike"
 
 

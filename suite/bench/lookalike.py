@@ -8,8 +8,10 @@ every pipeline sees the same frames:
 
 - `paper`: the seed paper's pipeline, the top camera only;
 - `robust`: the robust pipeline with its side check, the top camera and the side cameras;
-- `robust-top`: the robust pipeline without the side check, the top camera only
-  (`perception.pipeline`'s `robust-top` when it has one, else `RobustParams(side_check=False)`).
+- `robust-top`: the robust pipeline without the side check, the top camera only.
+
+A sensor is `none` (a perfect sensor), a name of `scenes.sensor.SENSOR_PRESETS`, or such a name
+with a noise correlation length in pixels after `@` (`kinect-v1@8`: `SensorSpec.with_noise`).
 
 Per waist and pipeline it reports the hourglasses refused (none of their detections grasped), with
 a 95% Wilson interval, the cans found (recall) with the dented cans counted as cans
@@ -33,8 +35,8 @@ log = logging.getLogger(__name__)
 
 #: the default waists (fractions of the can's radius): the family's 0.55 up to 0.95
 DEFAULT_WAISTS = (0.55, 0.65, 0.75, 0.80, 0.85, 0.90, 0.95)
-#: the pipelines compared, and the cameras each one uses
-PIPELINE_CAMERAS = {"paper": ("top",), "robust": ("top", "front", "back"), "robust-top": ("top",)}
+#: the cameras rendered: every camera a pipeline of `perception.pipeline.PIPELINE_CAMERAS` uses
+CAMERAS = ("top", "front", "back")
 #: the code the sweep runs: a figure is from a clean tree when none of it differs from the commit
 CODE_PATHS = ("perception", "scenes", "suite/bench/lookalike.py")
 #: where the figures are written by default
@@ -46,9 +48,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenes", type=positive_int, default=40, help="scenes (default 40)")
     p.add_argument("--waists", default=",".join(f"{w:g}" for w in DEFAULT_WAISTS),
                    help="hourglass waists, fractions of the can's radius in (0, 1] (default %(default)s)")
-    p.add_argument("--sensors", default="none,kinect-v1",
-                   help="sensor models, comma-separated: none (a perfect sensor) or a name of "
-                        "scenes.sensor.SENSOR_PRESETS (default %(default)s)")
+    p.add_argument("--sensors", default="none,kinect-v1,kinect-v1@8",
+                   help="sensor models, comma-separated: none (a perfect sensor), a name of "
+                        "scenes.sensor.SENSOR_PRESETS, or NAME@L for its noise correlated over L pixels "
+                        "(default %(default)s)")
     p.add_argument("--segmentation", choices=("color", "geometric"), default="geometric",
                    help="the pipelines' segmentation (default geometric, as the look-alike table)")
     p.add_argument("--out", metavar="DIR", default=None,
@@ -72,16 +75,48 @@ def parse_waists(text: str) -> tuple[float, ...]:
     return tuple(out)
 
 
-def parse_sensors(text: str) -> tuple[str, ...]:
-    """Sensor names (`none` or a preset), checked against `SENSOR_PRESETS`."""
+def sensor_model(name: str):
+    """The sensor a name of `--sensors` stands for (None for `none`).
+
+    Raises:
+        SuiteError: an unknown preset or a bad correlation length, naming it and what is allowed.
+    """
     from scenes.errors import SuiteError
     from scenes.sensor import SENSOR_PRESETS
 
+    if name == "none":
+        return None
+    preset, _, corr = name.partition("@")
+    if preset not in SENSOR_PRESETS:
+        raise SuiteError(f"--sensors: unknown sensor {name!r}; allowed: none, {', '.join(sorted(SENSOR_PRESETS))}, "
+                         "or one of them with @L for a noise correlation length of L pixels")
+    if not corr:
+        return SENSOR_PRESETS[preset]
+    try:
+        length = float(corr)
+    except ValueError:
+        length = -1.0
+    if not (length >= 0 and length < float("inf")):
+        raise SuiteError(f"--sensors: {name!r}: the correlation length after @ must be a number of pixels >= 0")
+    return SENSOR_PRESETS[preset].with_noise(correlation_px=length)
+
+
+def parse_sensors(text: str) -> tuple[str, ...]:
+    """Sensor names of `--sensors` (each checked by `sensor_model`)."""
+    from scenes.errors import SuiteError
+
     names = tuple(s.strip() for s in text.split(",") if s.strip())
-    bad = [s for s in names if s != "none" and s not in SENSOR_PRESETS]
-    if bad or not names:
-        raise SuiteError(f"--sensors {text!r}: allowed: none, {', '.join(sorted(SENSOR_PRESETS))}")
+    if not names:
+        raise SuiteError(f"--sensors {text!r}: name at least one sensor (none for a perfect one)")
+    for name in names:
+        sensor_model(name)
     return names
+
+
+def file_name(sensor: str) -> str:
+    """The JSON a sensor's figures are written to: `kinect-v1@8` -> `kinect-v1-corr8px.json`."""
+    preset, _, corr = sensor.partition("@")
+    return f"{preset}-corr{corr}px.json" if corr else f"{preset}.json"
 
 
 def code_commit(root: Path | None = None) -> str | None:
@@ -101,20 +136,10 @@ def code_commit(root: Path | None = None) -> str | None:
 
 def _detect(pipeline: str, frames: dict, spec, params):
     """One pipeline's detections on the frames it uses (`PIPELINE_CAMERAS`)."""
-    from perception.pipeline import PIPELINES, detect
-    from perception.robust import RobustParams, detect_cans_robust
+    from perception.pipeline import GRASP_CAMERA, PIPELINE_CAMERAS, detect
 
-    if pipeline == "robust-top" and pipeline not in PIPELINES:
-        return detect_cans_robust(frames["top"], spec, RobustParams(base=params, side_check=False))[0]
-    side = {n: frames[n] for n in PIPELINE_CAMERAS[pipeline] if n != "top"}
-    return detect(frames["top"], spec, params=params, pipeline=pipeline, side_images=side or None)[0]
-
-
-def robust_top_source() -> str:
-    """How `robust-top` runs: the pipeline's own entry, or the robust pipeline with its side check off."""
-    from perception.pipeline import PIPELINES
-
-    return "perception.pipeline robust-top" if "robust-top" in PIPELINES else "RobustParams(side_check=False)"
+    side = {n: frames[n] for n in PIPELINE_CAMERAS[pipeline] if n != GRASP_CAMERA}
+    return detect(frames[GRASP_CAMERA], spec, params=params, pipeline=pipeline, side_images=side or None)[0]
 
 
 def measure(*, seed: int, scenes: int, waists: tuple[float, ...], sensors: tuple[str, ...],
@@ -129,12 +154,11 @@ def measure(*, seed: int, scenes: int, waists: tuple[float, ...], sensors: tuple
     from perception.evaluate import match_lookalikes, match_scene, truth_cans
     from perception.grasps import PerceptionParams
     from perception.observe import sense
-    from perception.pipeline import noise_rng
+    from perception.pipeline import PIPELINE_CAMERAS, noise_rng
     from scenes import lookalikes as la
     from scenes.errors import SuiteError
     from scenes.generate import generate_scene
     from scenes.render import render
-    from scenes.sensor import SENSOR_PRESETS
     from scenes.spec import load_spec
 
     commit = code_commit()  # before the run: the code imported is the code of this moment
@@ -160,13 +184,14 @@ def measure(*, seed: int, scenes: int, waists: tuple[float, ...], sensors: tuple
                                   "dented_ids": [c.id for c in truth[n_cans:]], "by_waist": {}})
         for w in waists:
             sc = dataclasses.replace(scene, spec=la.with_hourglass_waist(scene.spec, w))
-            clean = render(sc, cameras=["top", "front", "back"])
+            clean = render(sc, cameras=list(CAMERAS))
             for name in sensors:
-                if name == "none":
+                sensor = sensor_model(name)
+                if sensor is None:
                     frames = clean
                 else:
                     rng = noise_rng(scene.seed)
-                    frames = {n: sense(clean[n], sensor=SENSOR_PRESETS[name], rng=rng) for n in ("top", "front", "back")}
+                    frames = {n: sense(clean[n], sensor=sensor, rng=rng) for n in CAMERAS}
                 row = {}
                 for pipeline in PIPELINE_CAMERAS:
                     dets = _detect(pipeline, frames, sc.spec, params)
@@ -181,10 +206,10 @@ def measure(*, seed: int, scenes: int, waists: tuple[float, ...], sensors: tuple
         out[name] = {
             "variant": "lookalike", "seeds": [drawn[0].seed, drawn[-1].seed], "skipped_seeds": skipped,
             "scenes": len(drawn), "sensor": name,
-            "sensor_model": None if name == "none" else dataclasses.asdict(SENSOR_PRESETS[name]),
+            "sensor_model": None if name == "none" else dataclasses.asdict(sensor_model(name)),
             "segmentation": segmentation, "waists": list(waists), "git_commit": commit,
             "pipelines": {p: {"cameras": list(c)} for p, c in PIPELINE_CAMERAS.items()},
-            "robust_top": robust_top_source(), "side_check": _side_check_settings(),
+            "side_check": _side_check_settings(),
             "curve": curve(records[name], waists), "scene_records": records[name],
         }
     return out
@@ -194,13 +219,14 @@ def _side_check_settings() -> dict:
     from perception import side_view as sv
 
     return {"tolerance_m": sv.SIDE_TOLERANCE_M, "band_edges": list(sv.BAND_EDGES), "sector_deg": sv.SECTOR_DEG,
-            "min_sector_points": sv.MIN_SECTOR_POINTS}
+            "min_sector_points": sv.MIN_SECTOR_POINTS, "max_axis_shift_m": sv.MAX_AXIS_SHIFT_M}
 
 
 def curve(records: list[dict], waists) -> list[dict]:
     """One row per waist and pipeline from the scene records: hourglasses refused (with a 95%
     Wilson interval), cans and dented cans found, and those the side check refused (found by
     `robust-top`, not by `robust`)."""
+    from perception.pipeline import PIPELINE_CAMERAS
     from suite.report.outcomes import wilson_interval
 
     rows = []
@@ -239,7 +265,7 @@ def table_lines(doc: dict) -> list[str]:
     """The curve as text: one line per waist and pipeline."""
     cams = "; ".join(f"{p}: {'+'.join(v['cameras'])}" for p, v in doc["pipelines"].items())
     lines = [f"lookalike seeds {doc['seeds'][0]}-{doc['seeds'][1]} ({doc['scenes']} scenes), sensor {doc['sensor']}, "
-             f"{doc['segmentation']} segmentation; cameras {cams}; robust-top = {doc['robust_top']}",
+             f"{doc['segmentation']} segmentation; cameras {cams}",
              f"{'waist/r':>7} {'pipeline':>10} {'hourglasses refused (95% CI)':>30} {'cans found':>12} "
              f"{'dented found':>12} {'refused by side check (cans, dented)':>37}"]
     for r in doc["curve"]:
@@ -264,12 +290,36 @@ def run(args: argparse.Namespace) -> int:
         if args.out:
             out = Path(args.out)
             out.mkdir(parents=True, exist_ok=True)
-            (out / f"{name}.json").write_text(json.dumps(doc) + "\n", encoding="utf-8")
+            (out / file_name(name)).write_text(json.dumps(doc) + "\n", encoding="utf-8")
     if args.json:
         print(json.dumps(docs))
         return 0
     for doc in docs.values():
         print("\n".join(table_lines(doc)))
     if args.out:
-        print(f"written: {', '.join(str(Path(args.out) / f'{n}.json') for n in docs)}")
+        print(f"written: {', '.join(str(Path(args.out) / file_name(n)) for n in docs)}")
     return 0
+
+
+def docs_table(docs: list[dict]) -> str:
+    """docs/perception.md's refusal curve: one row per sensor and waist, from the sweep's JSONs."""
+    lines = ["| sensor | waist / r | hourglasses | refused: paper (top) | refused: robust-top (top) "
+             "| refused: robust (top, front, back) | cans refused by the side check | dented cans refused by the side check "
+             "| robust's recall: cans, dented |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for doc in docs:
+        by = {(r["waist"], r["pipeline"]): r for r in doc["curve"]}
+        sensor = "perfect" if doc["sensor"] == "none" else doc["sensor"]
+        for w in doc["waists"]:
+            rob = by[(w, "robust")]
+
+            def refused(pipeline, bold=False):
+                r = by[(w, pipeline)]
+                cell = f"{100 * r['refused']:.0f}% ({r['hourglasses_refused']})"
+                return f"**{cell}**" if bold else cell
+            cells = [sensor, f"{w:g}", str(rob["hourglasses"]), refused("paper"), refused("robust-top"),
+                     refused("robust", bold=True), f"{rob['cans_refused_by_side_check']} of {rob['cans']}",
+                     f"{rob['dented_refused_by_side_check']} of {rob['dented']}",
+                     f"{rob['cans_found']}/{rob['cans']}, {rob['dented_found']}/{rob['dented']}"]
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from scenes.errors import SuiteError
-from suite.bench.lookalike import curve, parse_sensors, parse_waists, table_lines
+from suite.bench.lookalike import curve, file_name, parse_sensors, parse_waists, sensor_model, table_lines
 
 
 def _rec(*, paper, robust, top, hourglasses=2):
@@ -28,7 +28,7 @@ def test_the_curve_counts_refusals_recall_and_what_the_side_check_refused():
     # found by robust-top, not by robust: can 1 and the dented can 3 of the first scene
     assert (robust["cans_refused_by_side_check"], robust["dented_refused_by_side_check"]) == (1, 1)
     assert "cans_refused_by_side_check" not in paper
-    doc = {"seeds": [1, 2], "scenes": 2, "sensor": "none", "segmentation": "geometric", "robust_top": "x",
+    doc = {"seeds": [1, 2], "scenes": 2, "sensor": "none", "segmentation": "geometric",
            "pipelines": {"paper": {"cameras": ["top"]}}, "curve": list(rows.values())}
     assert any("3/4 75%" in line for line in table_lines(doc))
 
@@ -39,6 +39,10 @@ def test_bad_waists_and_sensors_are_refused_naming_the_value():
         parse_waists("0.8,1.2")
     with pytest.raises(SuiteError, match="'wide' is not a number"):
         parse_waists("wide")
-    assert parse_sensors("none,kinect-v1") == ("none", "kinect-v1")
-    with pytest.raises(SuiteError, match="allowed: none, "):
+    assert parse_sensors("none,kinect-v1,kinect-v1@8") == ("none", "kinect-v1", "kinect-v1@8")
+    assert sensor_model("none") is None and sensor_model("kinect-v1@8").correlation_px == 8.0
+    assert file_name("kinect-v1@8") == "kinect-v1-corr8px.json" and file_name("none") == "none.json"
+    with pytest.raises(SuiteError, match="unknown sensor 'kinect-v9'; allowed: none, "):
         parse_sensors("kinect-v9")
+    with pytest.raises(SuiteError, match="'kinect-v1@wide': the correlation length"):
+        parse_sensors("kinect-v1@wide")
