@@ -82,7 +82,9 @@ def measure(*, seed: int, scenes: int, variant: str = "clutter") -> dict:
     from scenes.generate import generate_scene
     from scenes.render import render
     from scenes.spec import load_spec
+    from suite.cli.perceive import code_commit
 
+    commit = code_commit()  # before the run: the code imported is the code of this moment
     spec = load_spec(variant=variant)
     models = noise_models()
     frames, skipped, s = [], [], seed - 1
@@ -113,7 +115,7 @@ def measure(*, seed: int, scenes: int, variant: str = "clutter") -> dict:
                      "estimate_mm": round(1e3 * float(np.mean([f["estimate_m"] for f in fr])), 4),
                      "ratio_min": round(float(ratios.min()), 4), "ratio_max": round(float(ratios.max()), 4),
                      "within": bool(np.all(np.abs(ratios - 1.0) <= TOLERANCE))})
-    return {"variant": variant, "seeds": [seed, s], "skipped_seeds": skipped, "scenes": scenes,
+    return {"variant": variant, "seeds": [seed, s], "skipped_seeds": skipped, "scenes": scenes, "git_commit": commit,
             "tolerance": TOLERANCE, "models": rows, "frames": frames}
 
 
