@@ -112,9 +112,11 @@ class WorldParams:
             raise SuiteError(f"perceived world: voxel_m {self.voxel_m} m is coarser than a can; allowed up to 0.05")
 
 
-#: p95 xy pose error (metres) measured by `perceive --evaluate` on `clutter` seeds 92000-92019
-#: (docs/perception.md): at most 1.39 mm on clean depth, 2.10 mm under kinect-v1 (either pipeline);
-#: rounded up. A perceived can on the plate is grown by it.
+#: p95 xy pose error (metres) measured by `perceive --evaluate` on `clutter` (docs/perception.md):
+#: at most 1.39 mm on clean depth (seeds 92000-92019); under kinect-v1 at 1x its sigma at most
+#: 2.10 mm independent (92000-92019) and 1.81 mm correlated over 4 or 8 px (97100-97119), either
+#: pipeline; rounded up. A perceived can on the plate is grown by it. (At 2x sigma the paper's
+#: pipeline reaches 4 mm: pass `WorldParams.can_padding_m` there.)
 CAN_PADDING_CLEAN_M = 0.0015
 CAN_PADDING_NOISY_M = 0.0025
 
