@@ -22,6 +22,8 @@ from scenes.spec import Obstacle, SceneSpec
 
 #: obstacles a family stands on the plate among the cans (never recyclable) are named so
 DISTRACTOR_PREFIX = "distractor_"
+#: the matching's cost of a pair farther apart than the gate (metres; far above any scene's distances)
+GATED_COST_M = 1e3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,8 +106,8 @@ def match(
     distractors: tuple[Obstacle, ...] = (),
     distractor_margin_m: float = 0.0,
 ) -> SceneMatch:
-    """Match detections to cans (Hungarian on xy distance; pairs farther than `gate_m` do not match)
-    and find the grasps on distractors.
+    """Match detections to cans (Hungarian on xy distance, as many pairs within `gate_m` as there
+    can be; pairs farther apart do not match) and find the grasps on distractors.
 
     Args:
         detections: the perceived cans.
@@ -122,7 +124,10 @@ def match(
         t = np.array([c.p_WC_m[:2] for c in cans])
         d = np.array([x.p_WC_m[:2] for x in detections])
         cost = np.linalg.norm(t[:, None, :] - d[None, :, :], axis=-1)
-        rows, cols = linear_sum_assignment(cost)
+        # pairs beyond the gate cost more than any set of pairs within it: the assignment makes as
+        # many matches as it can (on the raw distances, a can nothing was detected near could take
+        # a neighbour's detection when that made the sum of all distances smaller)
+        rows, cols = linear_sum_assignment(np.where(cost <= gate_m, cost, GATED_COST_M))
         for i, j in zip(rows, cols):
             if cost[i, j] > gate_m:
                 continue

@@ -134,3 +134,20 @@ def test_dented_cans_count_as_cans_in_recall_and_precision(scene, frames_at):
     assert (acc.matched, acc.dented_matched, acc.precision) == (7, 0, 1.0) and acc.recall == pytest.approx(7 / 8)
     # physics keeps it as the obstacle it was built as
     assert any(o.name.startswith(la.DENTED_PREFIX) for o in sc.spec.obstacles()) and len(sc.cans) == 7
+
+
+def test_a_missed_can_does_not_take_its_neighbours_match():
+    from types import SimpleNamespace
+
+    from perception.evaluate import match
+    from scenes.scene import CanPose
+
+    def det(i, x):
+        return SimpleNamespace(id=i, p_WC_m=(x, 0.0, 0.081), lying=False, top_z_m=0.142, axis_yaw_rad=0.0)
+
+    # can A has its detection 1 mm away; can X (missed) is 40 mm from it; an hourglass's detection
+    # 150 mm the other way. On raw distances, A-hourglass + X-A's detection (0.190 m) is cheaper
+    # than A-A's detection + X-hourglass (0.192 m), and both of those pairs are beyond the gate
+    cans = (CanPose(0, (0.0, 0.0, 0.081), False, 0.0), CanPose(1, (0.041, 0.0, 0.081), False, 0.0))
+    m = match([det(0, 0.001), det(1, -0.15)], cans, gate_m=0.033, radius_m=0.033, height_m=0.122)
+    assert m.pairs == ((0, 0),) and m.xy_error_m == pytest.approx((0.001,))
