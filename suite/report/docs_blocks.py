@@ -290,6 +290,14 @@ def perceived_execution_table(root: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def perception_correlated_table(root: Path) -> str:
+    """docs/perception.md: detection under correlated Kinect v1 noise, per pipeline and its cameras
+    (`suite.report.perception_correlated`); refuses an evaluation whose code was not a commit's."""
+    from suite.report.perception_correlated import correlated_table
+
+    return correlated_table(root, check_commit=lambda shown, commit: _check_commit(shown, commit, required=True))
+
+
 #: block name -> (page, how it is written)
 BLOCKS: dict[str, tuple[str, Callable[[Path], str]]] = {
     "answer-table": ("README.md", answer_table),
@@ -297,6 +305,7 @@ BLOCKS: dict[str, tuple[str, Callable[[Path], str]]] = {
     "recycle-v3-composition": ("docs/datasets.md", dataset_composition),
     "perception-table": ("docs/perception.md", perception_table),
     "perceived-execution-table": ("docs/perception.md", perceived_execution_table),
+    "perception-correlated-table": ("docs/perception.md", perception_correlated_table),
     "peers-table": ("README.md", peers_table),
     "peers-equal-table": ("docs/peers.md", peers_equal_table),
 }
