@@ -172,6 +172,21 @@ def fixtures(spec: SceneSpec) -> tuple[Obstacle, ...]:
 def inside(points: np.ndarray, kind: str, dims, X_WS: np.ndarray, margin_m: float) -> np.ndarray:
     """Which points (N, 3) lie within `margin_m` of a primitive (box, cylinder, capsule, sphere)
     at pose X_WS."""
+    d = np.asarray(dims, float)
+    if kind == "box":
+        reach = 0.5 * float(np.linalg.norm(d))
+    elif kind == "sphere":
+        reach = float(d[0])
+    else:  # cylinder (a capsule reaches one radius further along its axis)
+        reach = float(np.hypot(d[0], d[1] / 2)) + float(d[0])
+    near = np.abs(points - X_WS[:3, 3]).max(axis=1) <= reach + margin_m  # a cheap cube test first
+    out = np.zeros(len(points), bool)
+    if near.any():
+        out[near] = _inside(points[near], kind, dims, X_WS, margin_m)
+    return out
+
+
+def _inside(points: np.ndarray, kind: str, dims, X_WS: np.ndarray, margin_m: float) -> np.ndarray:
     p = (points - X_WS[:3, 3]) @ X_WS[:3, :3]
     if kind == "box":
         return np.all(np.abs(p) <= np.asarray(dims, float) / 2 + margin_m, axis=1)
@@ -184,6 +199,17 @@ def inside(points: np.ndarray, kind: str, dims, X_WS: np.ndarray, margin_m: floa
         z = np.clip(p[:, 2], -length / 2, length / 2)
         return np.hypot(np.hypot(p[:, 0], p[:, 1]), p[:, 2] - z) <= r + margin_m
     raise ValueError(f"unsupported shape {kind!r}")
+
+
+def depth_sigmas(sensor, z_m: np.ndarray) -> np.ndarray:
+    """The sensor's depth sigma (metres) at each depth of `z_m` (0 for a perfect sensor): constant
+    for the Gaussian model, growing as z^2 for structured light (`SensorSpec.depth_sigma_at_m`)."""
+    z = np.asarray(z_m, float)
+    if sensor is None:
+        return np.zeros(z.shape)
+    if sensor.kind == "gaussian":
+        return np.full(z.shape, sensor.depth_sigma_at_m(1.0))
+    return sensor.depth_sigma_at_m(1.0) * z * z
 
 
 def fill_row_holes(depth_m: np.ndarray, max_px: int, *, shadow_px_m: float | None = None, slack_px: int = 3) -> np.ndarray:
@@ -351,7 +377,7 @@ def build_world(
         ray = centres - image.X_WC[:3, 3]
         dist = np.linalg.norm(ray, axis=1)
         exit_depth = (v / 2) / np.abs(ray / dist[:, None]).max(axis=1) * np.abs(zc) / dist
-        tol = exit_depth + params.sigma_k * (0.0 if sensor is None else np.vectorize(sensor.depth_sigma_at_m)(zc))
+        tol = exit_depth + params.sigma_k * depth_sigmas(sensor, zc)
         with np.errstate(invalid="ignore"):
             seen_free |= ok & (d > zc + tol)  # inf (nothing within range) sees through
         # the frame's points in the volume
@@ -364,8 +390,7 @@ def build_world(
         hit_vox[tuple(k[keep].T)] = True
         # each point grown by `point_sigmas` of its own depth's sigma (at least MIN_POINT_PADDING_M)
         zp = (p[keep] - image.X_WC[:3, 3]) @ image.X_WC[:3, 2]
-        grow = np.maximum(params.point_sigmas * (np.zeros(len(zp)) if sensor is None or not len(zp) else
-                                                 np.vectorize(sensor.depth_sigma_at_m)(zp)), MIN_POINT_PADDING_M)
+        grow = np.maximum(params.point_sigmas * depth_sigmas(sensor, zp), MIN_POINT_PADDING_M)
         np.minimum.at(pt_lo, flat(k[keep]), p[keep] - grow[:, None])
         np.maximum.at(pt_hi, flat(k[keep]), p[keep] + grow[:, None])
         pad_seen.append(float(grow.max()) if len(grow) else 0.0)

@@ -39,6 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the cameras' sensor model (scenes/sensor.py): kinect-v1 is Khoshelham & Elberink's "
                         "structured-light calibration (default: the spec's, a perfect sensor)")
     add_noise_arguments(p)
+    p.add_argument("--world-image", metavar="FILE",
+                   help="also build the world the planners would plan in from every camera (perception.world) and "
+                        "draw it beside the truth to FILE (PNG), with its build time")
     p.add_argument("--sweep", metavar="DIR",
                    help="with --evaluate --scenes N: every pipeline at every noise level of the sweep "
                         "(Gaussian and structured-light), one JSON per run and noise_sweep.png in DIR")
@@ -128,8 +131,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.scenes > 1 and not args.evaluate:
         raise SuiteError(f"--scenes {args.scenes} needs --evaluate (several scenes are only evaluated)")
-    if args.scenes > 1 and args.images:
-        raise SuiteError("--images writes one scene's images; use it without --scenes")
+    if args.scenes > 1 and (args.images or args.world_image):
+        raise SuiteError("--images and --world-image draw one scene; use them without --scenes")
     if args.sweep:
         if not args.evaluate:
             raise SuiteError(f"--sweep {args.sweep} needs --evaluate (a sweep is evaluated against the ground truth)")
@@ -178,7 +181,21 @@ def run(args: argparse.Namespace) -> int:
             print("  " + line)
     if args.images:
         print(f"debug images written to {args.images}")
+    if args.world_image:
+        _world_image(args, scene)
     return 0
+
+
+def _world_image(args: argparse.Namespace, scene) -> None:
+    """Build the scene's perceived world (the same setup and noise draws) and draw it beside the truth."""
+    from perception.world import perceive_world
+    from suite.report.plots_perceived_world import perceived_world_figure
+
+    _, world = perceive_world(scene, setup=_setup(args), rng=_noise_rng(scene.seed))
+    s = world.summary()
+    print(f"perceived world: {s['boxes']} voxel boxes ({1e3 * s['voxel_m']:g} mm voxels, {s['voxels']} occupied), "
+          f"{s['cans']} cans padded {1e3 * s['can_padding_m']:g} mm, built in {s['build_time_s']:.2f} s; "
+          f"drawn to {perceived_world_figure(scene, world, args.world_image)}")
 
 
 def _run_many(args: argparse.Namespace) -> int:

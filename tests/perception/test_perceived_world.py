@@ -191,3 +191,25 @@ def test_a_perceived_world_without_perceived_grasps_is_refused(tmp_path):
     assert out.returncode != 0
     assert "perceived grasps" in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_depth_sigmas_follow_the_sensor_model():
+    from perception.world import depth_sigmas
+    from scenes.sensor import SENSOR_PRESETS, SensorSpec
+
+    z = np.array([0.5, 0.73, 1.2])
+    for sensor in (SENSOR_PRESETS["kinect-v1"], SENSOR_PRESETS["kinect-v1"].with_noise(scale=2.0),
+                   SensorSpec(kind="gaussian", depth_sigma_m=0.003)):
+        assert np.allclose(depth_sigmas(sensor, z), [sensor.depth_sigma_at_m(float(v)) for v in z])
+    assert (depth_sigmas(None, z) == 0).all()
+
+
+def test_inside_matches_the_shapes():
+    X = np.eye(4)
+    X[:3, 3] = (1.0, 2.0, 3.0)
+    p = X[:3, 3] + np.array([[0.0, 0.0, 0.0], [0.11, 0.0, 0.0], [0.0, 0.0, 0.24], [0.3, 0.3, 0.3]])
+    assert inside(p, "box", (0.2, 0.2, 0.5), X, 0.0).tolist() == [True, False, True, False]
+    assert inside(p, "box", (0.2, 0.2, 0.5), X, 0.02).tolist() == [True, True, True, False]
+    assert inside(p, "cylinder", (0.1, 0.5), X, 0.0).tolist() == [True, False, True, False]
+    assert inside(p, "capsule", (0.1, 0.3), X, 0.0).tolist() == [True, False, True, False]
+    assert inside(p, "sphere", (0.25,), X, 0.0).tolist() == [True, True, True, False]
