@@ -11,9 +11,11 @@
 - Dented can (`dented_N_bottom`, `_band`, `_top`): a can of the spec's size and colour whose side
   is pushed in over a band of its length. Primitives cannot be cut, so the dent is approximated:
   over the band, the body is a cylinder of radius r - d/2 whose axis is moved d/2 away from the
-  dent, which keeps the far side at r and pushes the near side in by `DENT_DEPTH_M` (d), tapering
-  to nothing at right angles to it. A real dent is local (a crease a few centimetres wide); this
-  one runs around half of the can, and has sharp edges at the band's ends.
+  dent, which keeps the far side at r and pushes the near side in by `DENT_DEPTH_M` (d): at an
+  angle t from the dent's direction the side lies about r - (d/2)(1 + cos t) from the can's axis
+  (d at the dent, d/2 at right angles to it, nothing on the far side). A real dent is local (a
+  crease a few centimetres wide); this one runs all round but the far side, and has sharp edges at
+  the band's ends.
 """
 
 from __future__ import annotations
