@@ -290,6 +290,23 @@ def perceived_execution_table(root: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: `bench lookalike --out` of the hourglass refusal curve: one JSON per sensor
+LOOKALIKE_SWEEP = PERCEPTION_RUNS / "lookalike-sweep-97300"
+
+
+def lookalike_sweep_table(root: Path) -> str:
+    """docs/perception.md: the hourglass refusal curve per sensor and waist, from `LOOKALIKE_SWEEP`;
+    refuses a sweep whose code was not a commit's."""
+    from suite.bench.lookalike import docs_table
+
+    docs = []
+    for path in sorted((root / LOOKALIKE_SWEEP).glob("*.json")):
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        _check_commit((LOOKALIKE_SWEEP / path.name).as_posix(), doc.get("git_commit"), required=True)
+        docs.append(doc)
+    return docs_table(sorted(docs, key=lambda d: (d["sensor"] != "none", d["sensor"])))
+
+
 def perception_correlated_table(root: Path) -> str:
     """docs/perception.md: detection under correlated Kinect v1 noise, per pipeline and its cameras
     (`suite.report.perception_correlated`); refuses an evaluation whose code was not a commit's."""
@@ -306,6 +323,7 @@ BLOCKS: dict[str, tuple[str, Callable[[Path], str]]] = {
     "perception-table": ("docs/perception.md", perception_table),
     "perceived-execution-table": ("docs/perception.md", perceived_execution_table),
     "perception-correlated-table": ("docs/perception.md", perception_correlated_table),
+    "lookalike-sweep-table": ("docs/perception.md", lookalike_sweep_table),
     "peers-table": ("README.md", peers_table),
     "peers-equal-table": ("docs/peers.md", peers_equal_table),
 }
