@@ -397,12 +397,9 @@ def build_world(
     # unseen space next to a fixture, a can or the robot is theirs (their own shadow); points are not
     # unseen space beside a can is its own shadow, unless it touches a surface seen there (then it may
     # be the hidden side of that object: occupied)
-    import cv2
+    from scipy.ndimage import binary_dilation
 
-    near_seen = np.stack([cv2.dilate(hit_vox[:, :, k].astype(np.uint8), np.ones((3, 3), np.uint8)) for k in range(shape[2])],
-                         axis=-1).astype(bool)
-    near_seen[:, :, 1:] |= near_seen[:, :, :-1].copy()
-    near_seen[:, :, :-1] |= near_seen[:, :, 1:].copy()
+    near_seen = binary_dilation(hit_vox, structure=np.ones((3, 3, 3), bool))
     shadow = ~near_seen.reshape(-1) & explained(centres, fixture_margin=0.0, can_margin=params.unseen_clear_m)
     # mostly inside a can or a fixture (its centre within half a voxel of it): theirs
     shadow |= explained(centres, fixture_margin=0.0, can_margin=v / 2)

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from suite.report.plots_common import plt
-from suite.report.scene_outlines import SIDE, TOP, primitive_outline
+from suite.report.plots_common import plt, save_figure
+from suite.report.scene_outlines import SIDE, TOP, _translation as _at, primitive_outline
 
 
 def perceived_world_figure(truth, world, out: str | Path, *, title: str = "") -> Path:
@@ -57,12 +57,5 @@ def perceived_world_figure(truth, world, out: str | Path, *, title: str = "") ->
     fig.tight_layout(rect=(0, 0.07, 1, 0.95))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
-
-def _at(center_m) -> np.ndarray:
-    X = np.eye(4)
-    X[:3, 3] = center_m
-    return X

@@ -211,14 +211,14 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
     record = judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s,
                           planning_cpu_time_s=planning_cpu_time_s)
     if problem.plan_world is not None:
-        _perceived_verdict(record, problem, planned, result)
+        _perceived_verdict(record, problem, planned, result, world)
     attribution = attribute(record["stats"], planning_time_s, fcl)
     if attribution is not None:
         record["attribution"] = attribution
     return record
 
 
-def _perceived_verdict(record: dict[str, Any], problem, planned, result: PlanResult) -> None:
+def _perceived_verdict(record: dict[str, Any], problem, planned, result: PlanResult, judge_world) -> None:
     """A trial planned in another world than the judge's: which world each check used, and, for a
     path the judge rejected for a collision that is free in the planner's world, its
     perception-induced failure (`stats.perception_induced`: where, what it struck, why)."""
@@ -228,7 +228,7 @@ def _perceived_verdict(record: dict[str, Any], problem, planned, result: PlanRes
     record["worlds"] = {"planned": problem.plan_world.source, "judged": "truth", "physics": "truth"}
     reason = str(record["stats"].get("invalid_reason", ""))
     if record["status"] == PlanStatus.INVALID_SOLUTION.value and reason.startswith("collision"):
-        found = perception_induced(problem, result.path, collision_world(problem), collision_world(planned))
+        found = perception_induced(problem, result.path, judge_world, collision_world(planned))
         if found is not None:
             record["stats"]["perception_induced"] = found
 
