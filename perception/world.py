@@ -25,7 +25,8 @@ the python-fcl world, the Drake scene of `ik` and `trajopt`, roboplan) plans in 
   shadow) unless next to a voxel where something else was seen, and the robot itself at the configuration the frame was
   taken in (each robot part grown by `robot_margin_m`; a held can is part of the robot).
 - **Boxes and padding**: occupied voxels are merged into boxes; each box reaches as far as what its
-  voxels hold: the bounding box of a voxel's points, or the whole cube where no camera saw in. A
+  voxels hold: the bounding box of a voxel's points, or the whole cube where no camera saw in,
+  kept out of each perceived can's held model where it stands (`perception.voxel_boxes`). A
   box's face on a seen surface is therefore at the surface's points, one on unseen space at the
   voxel's edge (up to `voxel_m` beyond the object); a seen voxel also reaches the occupied voxels
   beside it, so an object stays solid behind its seen surface. Seen points are grown by `point_sigmas`
@@ -45,6 +46,7 @@ import time
 import numpy as np
 
 from perception.geometry import back_project_camera, camera_to_world, project
+from perception.voxel_boxes import clear_of_cans, merge_boxes
 from scenes.errors import SuiteError
 from scenes.scene import CanPose, HeldCan, Scene
 from scenes.spec import Obstacle, SceneSpec, pose_tuple
@@ -87,6 +89,8 @@ class WorldParams:
             (the hidden side of that object stays occupied). It must exceed a voxel box's half size
             and padding plus a held can's margin, or a can lifted from its place starts in its own
             shadow.
+        merge_tol_m: a merged box takes in a neighbouring slab of voxels only when the slab's
+            faces across the merge lie within this of the box's (`perception.voxel_boxes.merge_boxes`).
         hole_fill_px: the longest run of pixels without depth along a row that is filled.
     """
 
@@ -99,6 +103,7 @@ class WorldParams:
     robot_margin_m: float = 0.02
     can_point_margin_m: float = 0.005
     unseen_clear_m: float = 0.015
+    merge_tol_m: float = 0.003
     hole_fill_px: int = 24
 
     def __post_init__(self):
@@ -134,7 +139,8 @@ class PerceivedWorld:
         scene: the world as a scene: known fixtures and voxel boxes in its spec's obstacles, the
             perceived cans (ids from PERCEIVED_ID_BASE) as its cans, the can model grown by the padding.
         can_of_detection: detection id -> the perceived can's id.
-        voxels: occupied voxels (after what is explained is left out); boxes: voxel boxes.
+        voxels: occupied voxels (after what is explained is left out); boxes: voxel boxes;
+            boxes_cleared: boxes moved back (or dropped) off a perceived can's held model.
         params: how it was built; cameras: the frames it fused; build_time_s: seconds.
         can_padding_m, voxel_padding_m: the padding of the cans, and of the boxes beyond their cubes.
     """
@@ -143,6 +149,7 @@ class PerceivedWorld:
     can_of_detection: dict[int, int]
     voxels: int
     boxes: int
+    boxes_cleared: int
     params: WorldParams
     cameras: tuple[str, ...]
     build_time_s: float
@@ -159,6 +166,7 @@ class PerceivedWorld:
 
     def summary(self) -> dict:
         return {"world": "perceived", "voxel_m": self.params.voxel_m, "voxels": self.voxels, "boxes": self.boxes,
+                "boxes_cleared": self.boxes_cleared,
                 "cans": len(self.scene.cans), "cameras": list(self.cameras),
                 "can_padding_m": self.can_padding_m, "voxel_padding_m": round(self.voxel_padding_m, 6),
                 "build_time_s": round(self.build_time_s, 4)}
@@ -244,35 +252,6 @@ def fill_row_holes(depth_m: np.ndarray, max_px: int, *, shadow_px_m: float | Non
             fill = np.where(shadow, dl, fill)
         row[cols[miss][ok]] = fill[ok]
     return d
-
-
-def _merge_boxes(occ: np.ndarray) -> list[tuple[tuple[int, int, int], tuple[int, int, int]]]:
-    """Occupied voxels (X, Y, Z bool) as axis-aligned boxes of whole voxels, greedily: the longest
-    run along x, grown along y while the whole row is occupied, then along z while the whole
-    rectangle is. Returns (start index, size in voxels) per box; together they cover exactly `occ`."""
-    left = occ.copy()
-    nx, ny, nz = occ.shape
-    out = []
-    for k in range(nz):
-        for j in range(ny):
-            i = 0
-            while i < nx:
-                if not left[i, j, k]:
-                    i += 1
-                    continue
-                i1 = i
-                while i1 + 1 < nx and left[i1 + 1, j, k]:
-                    i1 += 1
-                j1 = j
-                while j1 + 1 < ny and left[i:i1 + 1, j1 + 1, k].all():
-                    j1 += 1
-                k1 = k
-                while k1 + 1 < nz and left[i:i1 + 1, j:j1 + 1, k1 + 1].all():
-                    k1 += 1
-                left[i:i1 + 1, j:j1 + 1, k:k1 + 1] = False
-                out.append(((i, j, k), (i1 - i + 1, j1 - j + 1, k1 - k + 1)))
-                i = i1 + 1
-    return out
 
 
 def robot_explains(points: np.ndarray, *, spec: SceneSpec, q: np.ndarray | None, held: HeldCan | None,
@@ -407,6 +386,7 @@ def build_world(
     occ_grid = occ.reshape(tuple(shape))
     pad_v = max(pad_seen, default=MIN_POINT_PADDING_M)
     extra = list(fixtures(spec))
+    n_fixed = len(extra)
     # What each occupied voxel holds: the bounding box of its points, or the whole cube when no
     # camera saw into it; a merged box is the bounding box of what its voxels hold (its faces on
     # seen surfaces are where the points are, not at the voxels' edges).
@@ -426,15 +406,41 @@ def build_world(
         after[tuple(idx_a)] = occ_grid[tuple(idx_b)]  # the neighbour at +a is occupied
         c_lo[..., a] = np.where(before, np.minimum(c_lo[..., a], v_lo[..., a]), c_lo[..., a])
         c_hi[..., a] = np.where(after, np.maximum(c_hi[..., a], v_hi[..., a]), c_hi[..., a])
-    for n, (start, size) in enumerate(_merge_boxes(occ_grid)):
+    # the held model of every perceived can where it stands is the can's (`perception.voxel_boxes`),
+    # grown by how far the goal IK may place it off (its position tolerance per axis, and its
+    # orientation tolerance over the model's diagonal)
+    from scenes.ik import IkOptions
+
+    held_r = r + max(spec.grasp.held_margin_m, pad_c)
+    held_h = h + 2 * max(spec.grasp.held_margin_m, pad_c)
+    ik = IkOptions()
+    slack = math.sqrt(3) * ik.position_tolerance_m + ik.orientation_tolerance_rad * math.hypot(held_h, 2 * held_r)
+    held_r, held_h = held_r + slack, held_h + 2 * slack
+    # each voxel first (a face moved back loses at most its own slab), then each merged box (a
+    # box may reach back in by up to the merge's tolerance)
+    for i in np.flatnonzero(occ):
+        vi = np.unravel_index(i, tuple(shape))
+        kept = clear_of_cans(c_lo[vi], c_hi[vi], cans, held_r, held_h)
+        if kept is None:
+            occ_grid[vi] = False
+        else:
+            c_lo[vi], c_hi[vi] = kept
+    cleared = 0
+    for start, size in merge_boxes(occ_grid, c_lo, c_hi, params.merge_tol_m):
         cut = tuple(slice(a, a + b) for a, b in zip(start, size))
         b_lo = c_lo[cut].reshape(-1, 3).min(axis=0)
         b_hi = c_hi[cut].reshape(-1, 3).max(axis=0)
         if start[2] == 0 and b_lo[2] < lo[2] + v / 2:  # it stands on the plate (below the volume nothing is seen)
             b_lo[2] = spec.plate_top_z_m
+        kept = clear_of_cans(b_lo, b_hi, cans, held_r, held_h)
+        if kept is None or not np.array_equal(kept[0], b_lo) or not np.array_equal(kept[1], b_hi):
+            cleared += 1
+        if kept is None:
+            continue
+        b_lo, b_hi = kept
         X = np.eye(4)
         X[:3, 3] = (b_lo + b_hi) / 2
-        extra.append(Obstacle(f"{VOXEL_PREFIX}{n}", "box", tuple(float(s) for s in b_hi - b_lo), pose_tuple(X), VOXEL_RGBA))
+        extra.append(Obstacle(f"{VOXEL_PREFIX}{len(extra) - n_fixed}", "box", tuple(float(s) for s in b_hi - b_lo), pose_tuple(X), VOXEL_RGBA))
     can = dataclasses.replace(spec.can, radius_m=r + pad_c, height_m=h + 2 * pad_c)
     # The can in the gripper is where the fingers hold it, not where it was seen: it keeps the
     # truth's model and margin (the padding is taken back from its margin).
@@ -442,7 +448,7 @@ def build_world(
     world_spec = dataclasses.replace(spec, extra=tuple(extra), can=can, grasp=grasp)
     return PerceivedWorld(
         scene=Scene(world_spec, seed, cans), can_of_detection=by_det, voxels=int(occ.sum()),
-        boxes=len(extra) - len(fixtures(spec)), params=params, cameras=tuple(frames), build_time_s=time.perf_counter() - t0,
+        boxes=len(extra) - n_fixed, boxes_cleared=cleared, params=params, cameras=tuple(frames), build_time_s=time.perf_counter() - t0,
         can_padding_m=pad_c, voxel_padding_m=pad_v,
     )
 

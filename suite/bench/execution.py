@@ -45,6 +45,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--worlds", default="perceived", metavar="LIST",
                    help="perceived grasps: the worlds the planners plan in, each its own source: perceived (built "
                         "from the cameras, default), truth, or truth,perceived; truth grasps plan in the truth")
+    p.add_argument("--on-failure", default="skip", choices=("skip", "stop"),
+                   help="a can that cannot be fully planned: skip it and plan the rest around it (default), or stop")
     p.add_argument("--json", metavar="FILE", default=None, help="also write every execution record to FILE")
 
 
@@ -118,9 +120,9 @@ def run(args: argparse.Namespace) -> int:
             for grasps, setup, world in sources:
                 for p in planners:
                     jobs.append(ExecutionJob(p, configs[p], scene, grasps, 5.0, seed, reperceive=args.reperceive,
-                                             perception=setup, world=world))
+                                             perception=setup, world=world, on_failure=args.on_failure))
     print(f"{len(jobs)} executions ({len(planners)} planners x {len(variants)} variants x {args.scenes} scenes "
-          f"x {len(sources)} grasp sources, {args.cans} cans each) on {args.jobs} worker(s)")
+          f"x {len(sources)} grasp sources, {args.cans} cans each, on failure {args.on_failure}) on {args.jobs} worker(s)")
     t0 = time.perf_counter()
     records = run_jobs(jobs, workers=args.jobs)
     print(f"done in {time.perf_counter() - t0:.0f} s wall")

@@ -14,6 +14,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_planning_arguments(p)
     p.add_argument("--reperceive", action="store_true",
                    help="closed loop: render, perceive and plan the next can after each pick")
+    p.add_argument("--on-failure", default="skip", choices=("skip", "stop"),
+                   help="a can that cannot be fully planned: skip it and plan the rest around it (default), or stop")
     p.add_argument("--out", required=True, help="directory for execution.json and replay_<planner>.html")
     p.add_argument("--no-replay", action="store_true", help="do not record the Meshcat replay")
     p.add_argument("--time-step-s", type=positive_float, default=None,
@@ -72,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
             job = ExecutionJob(
                 planner=args.planner, planner_config=config_dict(make_config(cls, None)), scene=scene,
                 grasps=args.grasps, time_limit_s=args.time_limit_s, seed=args.seed, reperceive=args.reperceive,
-                replay_path=None if args.no_replay else str(out / f"replay_{args.planner}.html"),
+                on_failure=args.on_failure, replay_path=None if args.no_replay else str(out / f"replay_{args.planner}.html"),
                 config=ExecutionConfig(**overrides),
             )
             print(f"planning and executing {len(scene.cans)} can(s) of {scene.variant} seed {scene.seed} "

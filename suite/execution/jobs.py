@@ -11,20 +11,17 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from planners.base import PROBLEM_KINDS, PlanningProblem
-from scenes.scene import CanPose, Scene
-from suite.execution.commands import WorldState, planned_ahead, timed_cycle
-from suite.execution.monitor import where
+from planners.base import PROBLEM_KINDS
+from scenes.scene import Scene
+from suite.execution.plan_loop import ON_FAILURE, closed_loop, open_loop, plan_open_loop
 from suite.execution.config import ExecutionConfig
 from suite.execution.simulate import execute_cycles
-from suite.run.records import FINAL_RETURN_NOT_EXECUTED
 
 if TYPE_CHECKING:
     from perception.pipeline import PerceptionSetup
@@ -57,6 +54,10 @@ class ExecutionJob:
             the spec's cameras.
         world: the world the planners plan in, `truth` or `perceived` (None: the perceived one with
             perceived grasps; `suite.run.runner.plan_world_for`). Judge and physics use the truth.
+        on_failure: what a can not fully planned does to the cans after it (`ON_FAILURE`): `skip`
+            (it stays on the plate; the cans after it are planned again around it, and the loop
+            goes on) or `stop` (the run ends there). Pre-planned `cans` always stop: their later
+            plans assumed the can gone.
     """
 
     planner: str
@@ -72,124 +73,13 @@ class ExecutionJob:
     config: ExecutionConfig = ExecutionConfig()
     perception: PerceptionSetup | None = None
     world: str | None = None
+    on_failure: str = "skip"
 
+    def __post_init__(self):
+        if self.on_failure not in ON_FAILURE:
+            from scenes.errors import SuiteError
 
-def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob,
-              induced: list | None = None, planning_s: list | None = None) -> list[tuple[int, tuple, str]]:
-    """Plan every problem (five per can, in order): per can its paths and first failed status.
-    A path free in the planner's perceived world that the judge rejects in the truth is appended to
-    `induced` (can, problem kind, where, what it struck, cause); each planning time (s) to `planning_s`."""
-    from suite.run.trial import run_problem
-
-    out = []
-    for i in range(0, len(problems), len(PROBLEM_KINDS)):
-        chunk = problems[i:i + len(PROBLEM_KINDS)]
-        paths, failed = [], ""
-        for problem in chunk:
-            rec = run_problem(problem, planner=job.planner, planner_config=job.planner_config, run_seed=job.seed)
-            ok = rec["status"] == "success"
-            paths.append(rec["path"] if ok else None)
-            found = rec.get("stats", {}).get("perception_induced")
-            if planning_s is not None and rec.get("planning_time_s") is not None:
-                planning_s.append(float(rec["planning_time_s"]))
-            if found is not None and induced is not None:
-                induced.append({"can": problem.can_id, "kind": problem.kind, **found})
-            if not ok and not failed:
-                failed = f"{problem.kind} {rec['status']}" + (f" (perception-induced: {found['cause']})" if found else "")
-        out.append((chunk[0].can_id, tuple(paths), failed))
-    return out
-
-
-def _open_loop(cans: Sequence[tuple[int, tuple, str]]):
-    """Cycles in order up to the first can not fully planned (later plans assumed it gone)."""
-    cycles, stopped = [], ""
-    for i, (can_id, paths, failed) in enumerate(cans):
-        if i == len(cans) - 1 and paths[-1] is None and all(p is not None for p in paths[:-1]):
-            # the last can's return (after the drop) is missing: its can still goes in the bin; the
-            # arm stays over the bin, and the record says the return was not executed
-            paths = paths[:-1]
-            stopped = f"can {can_id}: {FINAL_RETURN_NOT_EXECUTED} ({failed or 'not planned'})"
-        elif failed or any(p is None for p in paths):
-            stopped = f"can {can_id}: {failed or 'not planned'}"
-            break
-        cycle = timed_cycle(can_id, paths)
-        if cycle is None:
-            stopped = f"can {can_id}: timing failed"
-            break
-        cycles.append(cycle)
-    return planned_ahead(cycles, stopped)
-
-
-def can_pose_from(can_id: int, X_WC: np.ndarray) -> CanPose:
-    """The scene model of a can from its simulated pose (upright or lying, whichever is nearer)."""
-    axis = X_WC[:3, 2]
-    lying = bool(abs(axis[2]) < math.cos(math.pi / 4))
-    yaw = float(math.atan2(axis[1], axis[0]) if lying else math.atan2(X_WC[1, 0], X_WC[0, 0]))
-    return CanPose(can_id, tuple(float(v) for v in X_WC[:3, 3]), lying, yaw)
-
-
-def _closed_loop(job: ExecutionJob, induced: list, worlds: list, planning_s: list):
-    """Between cycles: look again, rebuild the scene from where the cans now are, plan the next
-    can, and hand its cycle to the simulation. In a perceived world, the world is rebuilt from
-    every camera's fresh frame (the arm, at its pose when they were taken, left out); the truth of
-    where the cans are serves the judge only. Perception-induced failures go to `induced`, each
-    world's summary to `worlds`."""
-    from perception.pipeline import GRASP_CAMERA, PerceptionSetup, detect_cans, detect_in_frames, noise_rng
-    from perception.side_view import SIDE_CAMERAS
-    from scenes.grasp_rule import truth_grasp
-    from scenes.render import render
-    from suite.problems.cycle import build_problems
-    from suite.run.runner import plan_world_for
-
-    spec = job.scene.spec
-    tried: set[int] = set()
-    perceived_world = plan_world_for(job.grasps, job.world) == "perceived"
-
-    def provide(world: WorldState):
-        cans = [can_pose_from(i, X) for i, X in sorted(world.X_WCans.items())
-                if where(spec, X[:3, 3]) == "plate" and i not in tried]
-        if not cans:
-            return None, ""
-        now = Scene(spec, job.scene.seed, tuple(cans))
-        seen = None
-        if job.grasps == "truth":
-            grasp = truth_grasp(now, cans[0])
-        elif perceived_world:
-            from perception.world import perceive_world
-
-            rng = noise_rng(job.scene.seed, *([len(tried)] if tried else []))
-            detections, seen = perceive_world(now if world.images is None else job.scene,
-                                              setup=job.perception or PerceptionSetup(), rng=rng,
-                                              images=world.images, q_robot=world.q_images)
-            worlds.append(seen.summary())
-            if not detections:
-                return None, f"{len(cans)} can(s) left on the plate, none detected"
-            grasp = detections[0].grasp
-        else:
-            # Before the first pick the arm has not yet moved into view (as in open loop); later
-            # frames were taken from the simulation just after the last release over the bin.
-            setup = job.perception
-            robust = setup is not None and setup.pipeline == "robust"
-            cams = [GRASP_CAMERA] + ([c for c in SIDE_CAMERAS if c in spec.cameras.poses] if robust else [])
-            images = world.images if world.images is not None else render(job.scene, cameras=cams)
-            if setup is None:
-                detections, _ = detect_cans(images[GRASP_CAMERA], spec)
-            else:  # a fresh noise draw per frame; the first frame's is `perceive`'s
-                rng = noise_rng(job.scene.seed, *([len(tried)] if tried else []))
-                detections = detect_in_frames(images, spec, setup=setup, rng=rng)
-            if not detections:
-                return None, f"{len(cans)} can(s) left on the plate, none detected"
-            grasp = detections[0].grasp
-        problems = build_problems(now, [grasp], time_limit_s=job.time_limit_s, seed=job.seed,
-                                  q_home=world.q_command, world=seen)
-        (can_id, paths, failed), = plan_cans(problems, job, induced, planning_s)
-        tried.add(can_id)
-        if failed:
-            return None, f"can {can_id}: {failed}"
-        cycle = timed_cycle(can_id, paths)
-        return (cycle, "") if cycle is not None else (None, f"can {can_id}: timing failed")
-
-    return provide
+            raise SuiteError(f"unknown on-failure policy {self.on_failure!r}; allowed: {', '.join(ON_FAILURE)}")
 
 
 def run_execution(job: ExecutionJob) -> dict[str, Any]:
@@ -212,21 +102,25 @@ def run_execution(job: ExecutionJob) -> dict[str, Any]:
     # The arm starts where the first approach starts (above the plate); the goal IK behind it runs
     # once: from the problems this job plans, or from the first grasp's problems alone.
     if job.reperceive:
-        provider = _closed_loop(job, induced, worlds, planning_s)
+        provider = closed_loop(job, induced, worlds, planning_s)
         q_home = first_problems(first_only=True)[0].q_start
         worlds.clear()  # the closed loop builds its own (the first from the same frames)
     elif job.cans is None:
-        problems = first_problems()
-        if not problems:
+        grasps, seen = scene_task(scene, grasps=job.grasps, perception=job.perception, world=job.world)
+        if seen is not None:
+            worlds.append(seen.summary())
+        if not grasps:
             raise RuntimeError(f"no grasps to plan: {job.grasps} grasps found no can")
-        provider, q_home = _open_loop(plan_cans(problems, job, induced, planning_s)), problems[0].q_start
+        planned, q_home = plan_open_loop(scene, grasps, seen, job, induced, planning_s)
+        provider = open_loop(planned, skip=job.on_failure == "skip")
     else:
-        provider, q_home = _open_loop(job.cans), np.asarray(job.q_home, float)
+        provider, q_home = open_loop(job.cans), np.asarray(job.q_home, float)
     meshcat = meshcat_for(scene) if job.replay_path else None
     outcome = execute_cycles(scene, provider, q_home=q_home, planner=job.planner, config=job.config,
                              meshcat=meshcat, cameras=job.reperceive and job.grasps == "perceived")
     record = outcome.to_json()
-    record.update(grasps=job.grasps, reperceive=job.reperceive, config=dataclasses.asdict(job.config))
+    record.update(grasps=job.grasps, reperceive=job.reperceive, config=dataclasses.asdict(job.config),
+                  on_failure=job.on_failure if job.cans is None else "stop")
     record["worlds"] = {"planned": plan_world_for(job.grasps, job.world), "judged": "truth", "physics": "truth"}
     if worlds:
         record["perceived_worlds"] = worlds
@@ -271,7 +165,6 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
             also one whose steps are all stored outside the benchmark (default: the cans planned,
             in id order).
     """
-    from planners.base import PROBLEM_KINDS
 
     by_id = {r["trial_id"]: r for r in records}
     groups: dict[tuple[str, str], list] = {}

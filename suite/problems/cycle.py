@@ -125,6 +125,8 @@ def build_problems(
     bin_warm_start: bool = True,
     goal_clearance_m: float = GOAL_CLEARANCE_M,
     world=None,
+    removed: tuple[int, ...] = (),
+    seen_removed: tuple[int, ...] = (),
 ) -> list[PlanningProblem]:
     """The named problems of the whole task, five per grasp, in execution order.
 
@@ -145,6 +147,8 @@ def build_problems(
             a dataset built without it (recycle-v1, recycle-v2) records so, and is posed again
             without it (`suite.run.build_dataset.pose_settings`).
         goal_clearance_m: the IK's least distance to the scene at every posed configuration.
+        removed, seen_removed: the cans already recycled before the first grasp (the truth's ids,
+            and the perceived world's).
 
     Returns:
         Problems whose start or goal could not be solved carry pre_status IK_FAILED (q_goal None,
@@ -164,8 +168,7 @@ def build_problems(
         raise SuiteError("no collision-free IK solution for the 'above the plate' waypoint of this scene")
     q = q_plate if q_home is None else np.asarray(q_home, float)
     q_bin_before = None
-    removed: tuple[int, ...] = ()
-    seen_removed: tuple[int, ...] = ()  # in the perceived world: its cans' ids
+    removed, seen_removed = tuple(removed), tuple(seen_removed)  # seen: the perceived world's can ids
     problems: list[PlanningProblem] = []
     for grasp in grasps:
         chain, q_bin, removed_after, seen_after = _cycle(

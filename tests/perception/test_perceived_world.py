@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from perception.pipeline import PerceptionSetup, noise_rng
-from perception.world import (LOOSE_PREFIXES, VOXEL_PREFIX, WorldParams, _merge_boxes, fill_row_holes, fixtures,
+from perception.voxel_boxes import clear_of_cans, merge_boxes
+from perception.world import (LOOSE_PREFIXES, VOXEL_PREFIX, WorldParams, fill_row_holes, fixtures,
                               inside, perceive_world)
 from scenes.errors import SuiteError
 from scenes.generate import generate_scene
-from scenes.scene import Scene
+from scenes.scene import CanPose, Scene
 from scenes.spec import Obstacle, load_spec, pose_tuple
 
 ROBUST_KINECT = PerceptionSetup(pipeline="robust", sensor="kinect-v1")
@@ -116,7 +117,7 @@ def test_row_holes_are_filled_far_only_as_a_projector_shadow():
 def test_merged_boxes_cover_exactly_the_occupied_voxels():
     occ = np.random.default_rng(3).random((9, 7, 5)) < 0.4
     got = np.zeros_like(occ, dtype=int)
-    for (i, j, k), (a, b, c) in _merge_boxes(occ):
+    for (i, j, k), (a, b, c) in merge_boxes(occ):
         got[i:i + a, j:j + b, k:k + c] += 1
     assert (got == occ).all()
 
@@ -213,3 +214,25 @@ def test_inside_matches_the_shapes():
     assert inside(p, "cylinder", (0.1, 0.5), X, 0.0).tolist() == [True, False, True, False]
     assert inside(p, "capsule", (0.1, 0.3), X, 0.0).tolist() == [True, False, True, False]
     assert inside(p, "sphere", (0.25,), X, 0.0).tolist() == [True, True, True, False]
+
+
+def test_a_box_is_kept_out_of_a_perceived_cans_held_model():
+    """A box reaching into the disc a can holds where it stands loses the face that costs least;
+    one beside the disc's square corner stays; one wholly inside is dropped."""
+    can = CanPose(1000, (0.0, 0.0, 0.1), False, 0.0)
+    R, H = 0.038, 0.132
+    # a corner poking 3 mm into the disc from the +x, +y diagonal
+    d = R / np.sqrt(2) - 0.003
+    lo, hi = clear_of_cans([d, d, 0.05], [d + 0.05, d + 0.01, 0.15], [can], R, H)
+    gap = np.hypot(np.clip(0.0, lo[0], hi[0]), np.clip(0.0, lo[1], hi[1]))
+    # raising the long x side's low face costs 11% of the box, the short y side's 56%
+    assert gap >= R - 1e-9 and lo[0] > d and lo[1] == pytest.approx(d)
+    corner = ([R * 0.75, R * 0.75, 0.05], [0.1, 0.1, 0.15])  # inside the square, outside the disc
+    kept = clear_of_cans(*corner, [can], R, H)
+    assert np.allclose(kept[0], corner[0]) and np.allclose(kept[1], corner[1])
+    assert clear_of_cans([-0.01, -0.01, 0.08], [0.01, 0.01, 0.12], [can], R, H) is None
+    above = clear_of_cans([-0.01, -0.01, 0.15], [0.01, 0.01, 0.2], [can], R, H)  # its low face raised to the top
+    assert above is not None and above[0][2] == pytest.approx(0.1 + H / 2)
+    lying = CanPose(1001, (0.0, 0.0, 0.05), True, 0.0)  # along x: its box is cleared
+    lo, hi = clear_of_cans([0.06, -0.02, 0.02], [0.2, 0.02, 0.08], [lying], R, H)
+    assert lo[0] == pytest.approx(H / 2)

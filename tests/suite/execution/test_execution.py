@@ -10,7 +10,8 @@ from planners.registry import planner_class
 from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp
 from scenes.spec import load_spec
-from suite.execution.jobs import ExecutionJob, can_pose_from, plan_cans, _open_loop
+from suite.execution.jobs import ExecutionJob
+from suite.execution.plan_loop import can_pose_from, open_loop, plan_cans
 from suite.execution.monitor import bin_region, where
 from suite.execution.simulate import execute_cycles
 from suite.problems.cycle import build_problems
@@ -32,7 +33,7 @@ def _execute(scene, grasps, planner="rrt"):
                        scene.seed)
     cans = plan_cans(problems, job)
     assert all(not failed for _, _, failed in cans), cans
-    return execute_cycles(scene, _open_loop(cans), q_home=problems[0].q_start, planner=planner)
+    return execute_cycles(scene, open_loop(cans), q_home=problems[0].q_start, planner=planner)
 
 
 @pytest.mark.parametrize("lying", [False, True])
@@ -119,7 +120,7 @@ def test_reperceive_picks_a_moved_can_from_where_it_really_is():
     problems = build_problems(believed, [truth_grasp(believed, c) for c in believed.cans], time_limit_s=5.0,
                               seed=believed.seed)
     job = ExecutionJob("rrt", config, believed, "perceived", 5.0, believed.seed)
-    stale = execute_cycles(actual, _open_loop(plan_cans(problems, job)), q_home=problems[0].q_start,
+    stale = execute_cycles(actual, open_loop(plan_cans(problems, job)), q_home=problems[0].q_start,
                            planner="rrt")
     assert stale.cans[0].where == "bin"
     assert stale.cans[1].where != "bin"
@@ -224,3 +225,38 @@ def test_a_can_flung_off_the_table_comes_to_rest_and_the_simulation_stays_finite
     assert np.all(np.isfinite(p)) and p[2] < -0.3
     assert np.linalg.norm(sim.plant.EvalBodySpatialVelocityInWorld(sim.pc, can).get_coeffs()) < 1e-2  # at rest
     assert monitor.fates([])[0].where == "elsewhere"
+
+
+def test_a_can_that_cannot_be_planned_is_skipped_and_the_rest_planned_around_it():
+    """An unreachable grasp between two real ones: with `skip` the can after it is posed again (the
+    first can gone) and the run goes on; with `stop` nothing after it is planned."""
+    from suite.execution.plan_loop import plan_open_loop
+
+    spec = load_spec(variant="open").with_can_count(2)
+    scene = generate_scene(spec, seed=11)
+    first, second = (truth_grasp(scene, c) for c in scene.cans)
+    far = first.X_WG.copy()
+    far[:3, 3] += [2.0, 0.0, 0.0]  # out of the arm's reach: no goal IK
+    bad = type(first)(99, far, far, False)
+    cfg = config_dict(make_config(planner_class("rrt"), None))
+    for policy, n in (("skip", 3), ("stop", 2)):
+        job = ExecutionJob("rrt", cfg, scene, "truth", 5.0, scene.seed, on_failure=policy)
+        planned, q_home = plan_open_loop(scene, [first, bad, second], None, job, [], [])
+        assert len(planned) == n and np.all(np.isfinite(q_home))
+        assert not planned[0][2] and "ik_failed" in planned[1][2]
+    assert planned[0][0] == scene.cans[0].id
+    job = ExecutionJob("rrt", cfg, scene, "truth", 5.0, scene.seed)
+    planned, _ = plan_open_loop(scene, [first, bad, second], None, job, [], [])
+    assert planned[2][0] == scene.cans[1].id and not planned[2][2]
+    provide = open_loop(planned, skip=True)
+    got = [provide(None) for _ in range(3)]
+    assert [c.can_id for c, _ in got[:2]] == [scene.cans[0].id, scene.cans[1].id]
+    assert got[2][0] is None and got[2][1].startswith(f"skipped can {planned[1][0]}: ")
+
+
+def test_an_unknown_failure_policy_is_refused():
+    from scenes.errors import SuiteError
+
+    scene = generate_scene(load_spec(variant="open").with_can_count(1), seed=1)
+    with pytest.raises(SuiteError, match="on-failure policy 'retry'; allowed: skip, stop"):
+        ExecutionJob("rrt", {}, scene, "truth", 5.0, 1, on_failure="retry")

@@ -234,7 +234,8 @@ def test_a_planner_tied_to_its_world_is_not_applicable():
 @pytest.mark.slow
 def test_a_static_bin_through_the_loop_reproduces_todays_execution():
     from planners.registry import planner_class
-    from suite.execution.jobs import ExecutionJob, _open_loop
+    from suite.execution.jobs import ExecutionJob
+    from suite.execution.plan_loop import open_loop
     from suite.execution.moving_bin import run_moving_bin
     from suite.execution.simulate import execute_cycles
     from suite.run.trial import config_dict, make_config
@@ -245,14 +246,14 @@ def test_a_static_bin_through_the_loop_reproduces_todays_execution():
     record = run_moving_bin(job)
     assert record.status == "ok" and record.stopped == ""
     # today's open-loop execution of the same plans (its transit and return from the trial as well)
-    from suite.execution.jobs import plan_cans
+    from suite.execution.plan_loop import plan_cans
     from suite.problems.cycle import build_problems
     from scenes.grasp_rule import truth_grasp
 
     scene = job.scene
     problems = build_problems(scene, [truth_grasp(scene, c) for c in scene.cans], time_limit_s=5.0, seed=3)
     ejob = ExecutionJob("rrt", config_dict(make_config(planner_class("rrt"), None)), scene, "truth", 5.0, 3)
-    today = execute_cycles(scene, _open_loop(plan_cans(problems, ejob)), q_home=problems[0].q_start, planner="rrt")
+    today = execute_cycles(scene, open_loop(plan_cans(problems, ejob)), q_home=problems[0].q_start, planner="rrt")
     assert record.cans_in_bin == today.cans_in_bin == 2
     assert record.collisions == today.collisions == 0
     assert record.contacts_bin == record.contacts_person == 0
