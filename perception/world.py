@@ -260,7 +260,7 @@ def robot_explains(points: np.ndarray, *, spec: SceneSpec, q: np.ndarray | None,
     with them)."""
     if q is None or len(points) == 0:
         return np.zeros(len(points), bool)
-    from scenes.fcl_world import robot_parts
+    from scenes.collision.world import robot_parts
     from scenes.robot_model import load_robot
 
     robot = load_robot(spec.robot)

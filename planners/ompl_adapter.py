@@ -102,7 +102,7 @@ class BatchMotionValidator(ob.MotionValidator):
     instead of one callback per state. The answer is that of checking every sample.
 
     With `certify`, a motion whose samples are free must also be proved free along its whole
-    length by the exact segment check (`scenes.fcl_certify`, the judge's certifier on the same
+    length by the exact segment check (`scenes.collision.certify`, the judge's certifier on the same
     world and pairs); an `unproved` segment counts as blocked. The start state is taken as valid
     (as OMPL's DiscreteMotionValidator does).
 
@@ -162,7 +162,7 @@ class BatchMotionValidator(ob.MotionValidator):
         if not free:
             return False
         if self.certify:
-            from scenes.fcl_certify import CERTIFIED, certifier
+            from scenes.collision.certify import CERTIFIED, certifier
 
             t0 = time.perf_counter()
             verdict = certifier(self.world).certify(np.stack([a, b])).verdict

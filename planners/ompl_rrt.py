@@ -89,7 +89,7 @@ class OmplConfig:
             `time_limit_s`.
         motion_check: "samples" (default, the field's rule as in OMPL and MoveIt: a motion is free
             if its samples `resolution_rad` apart are) or "certified" (its samples are free and
-            the exact segment check of `scenes.fcl_certify` proves the whole motion free; an
+            the exact segment check of `scenes.collision.certify` proves the whole motion free; an
             unproved motion counts as blocked). The judge applies the same certifier afterwards.
         verbose: let OMPL's informational log messages through.
     """
@@ -381,7 +381,7 @@ def _certified_if_asked(cfg: OmplConfig, world, Q: np.ndarray) -> bool:
     """True unless `cfg` asks for certified motions and the exact check does not certify path Q."""
     if cfg.motion_check != "certified":
         return True
-    from scenes.fcl_certify import CERTIFIED, certifier
+    from scenes.collision.certify import CERTIFIED, certifier
 
     return certifier(world).certify(Q).verdict == CERTIFIED
 

@@ -1,7 +1,7 @@
 """roboplan's scene of a problem, built from the suite's own models with the python-fcl world's geometry.
 
 `roboplan` (optional extra `peers`) checks collisions with coal on a pinocchio model. This module
-gives it exactly the primitives, poses and filtered pairs of `scenes.fcl_world.CollisionWorld`:
+gives it exactly the primitives, poses and filtered pairs of `scenes.collision.world.CollisionWorld`:
 
 - The robot is written out as URDF (version 1.1, so that urdfdom reads capsules) from
   `scenes.robot_model.load_robot()`: the iiwa's links and joints, the WSG body welded to link 7 at
@@ -30,8 +30,8 @@ import itertools
 import numpy as np
 import roboplan.core as rpc
 
-from scenes.fcl_shapes import grown_dims
-from scenes.fcl_world import GRIPPER_ASSEMBLY
+from scenes.collision.shapes import grown_dims
+from scenes.collision.world import GRIPPER_ASSEMBLY
 from scenes.robot_model import RobotModel, load_robot, matrix_to_rpy
 
 #: The world frame of a pinocchio model (its joint 0).

@@ -5,7 +5,7 @@ diagrams, python-fcl objects) once per distinct world and reuses them.
 
 Two python-fcl worlds answer the same questions: `collision_world`, the numpy reference, which the
 judge (validator, certifier, metrics) uses; and `planning_world`, which the planners check with:
-the compiled kernels (`scenes.fcl_compiled`) unless the environment's SUITE_CHECKER says
+the compiled kernels (`scenes.collision.compiled`) unless the environment's SUITE_CHECKER says
 `numpy` (`compare --checker numpy`: the fallback, the same answers at numpy's speed).
 """
 
@@ -15,7 +15,7 @@ import contextlib
 import os
 
 from scenes.errors import SuiteError
-from scenes.fcl_world import CollisionWorld
+from scenes.collision.world import CollisionWorld
 
 #: The planners' checkers (`planning_world`), and the environment variable that chooses one.
 CHECKERS = ("compiled", "numpy")
@@ -85,7 +85,7 @@ def planning_world(problem) -> CollisionWorld:
     decided by the compiled kernels (or the numpy world itself when the checker is `numpy`)."""
     if checker() == "numpy":
         return collision_world(problem)
-    from scenes.fcl_compiled import CompiledWorld
+    from scenes.collision.compiled import CompiledWorld
 
     return _cached_world(_COMPILED, CompiledWorld, problem)
 

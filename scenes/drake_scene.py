@@ -262,7 +262,7 @@ def _add_moving_bin(plant, spec, scenario, friction):
 
 
 def _filters(plant, iiwa, wsg, plate_body, held_body, filtered) -> CollisionFilterDeclaration:
-    """The filters shared with the python-fcl world (see `scenes.fcl_world`).
+    """The filters shared with the python-fcl world (see `scenes.collision.world`).
 
     Drake itself already filters bodies joined by a joint and bodies welded into one rigid
     assembly (link 7, gripper, fingers, held can in "plan" mode).

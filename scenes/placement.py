@@ -141,7 +141,7 @@ def _extra_objects(extra: tuple) -> tuple:
     """The drawn obstacles as (FCL object, box centre, box half extents)."""
     import fcl
 
-    from scenes.fcl_shapes import aabb_half_extents, fcl_geometry
+    from scenes.collision.shapes import aabb_half_extents, fcl_geometry
 
     out = []
     for o in extra:
@@ -173,7 +173,7 @@ def _can_half_extents(can: CanPose, r: float, h: float) -> np.ndarray:
 @functools.lru_cache(maxsize=4)
 def _gripper_geometry(open_width_m: float) -> tuple:
     """`_gripper_parts` with each part's FCL geometry, made once."""
-    from scenes.fcl_shapes import fcl_geometry
+    from scenes.collision.shapes import fcl_geometry
 
     return tuple((kind, dims, X_GS, fcl_geometry(kind, dims)) for kind, dims, X_GS in _gripper_parts(open_width_m))
 
@@ -187,7 +187,7 @@ def gripper_clear(can: CanPose, others, spec: SceneSpec) -> bool:
     (the same answer, fewer queries)."""
     import fcl
 
-    from scenes.fcl_shapes import aabb_half_extents
+    from scenes.collision.shapes import aabb_half_extents
     from scenes.grasp_rule import truth_grasp
 
     r, h = spec.can.radius_m, spec.can.height_m
@@ -221,7 +221,7 @@ def _extra_boxes(extra: tuple) -> tuple:
     """The drawn obstacles' bounding boxes as float tuples (centre, half extents), and for an
     upright prism (a cylinder with a vertical axis, a box turned about z only) its footprint's
     centre, the radii of the discs around and within the footprint, and its height range."""
-    from scenes.fcl_shapes import aabb_half_extents
+    from scenes.collision.shapes import aabb_half_extents
 
     out = []
     for o in extra:

@@ -21,7 +21,7 @@ import fcl
 import numpy as np
 
 from planners.roboplan_scene import RoboplanWorld, obstacle_primitive
-from scenes.fcl_shapes import fcl_geometry
+from scenes.collision.shapes import fcl_geometry
 
 #: Contacts within this depth or gap (m) are "shallow": both verdicts are right to floating point.
 SHALLOW_M = 1e-6

@@ -3,7 +3,7 @@
 For every path of a selection (a dataset's non-trivial references, and with `--run` each
 planner's successful paths of that run), on the path's own python-fcl world: the seconds of the
 validator's fixed-step check (`CollisionWorld.path_free` at 0.01 rad: the field's rule) and of the
-exact check (`scenes.fcl_certify`), each the median of `--repeats` runs, the states each looked at
+exact check (`scenes.collision.certify`), each the median of `--repeats` runs, the states each looked at
 and the exact distance queries of the certificate. Reported per group: median and p90 of the
 per-path cost ratio (certified / fixed step), and the verdicts.
 """
@@ -34,7 +34,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def measure_path(path: np.ndarray, world, *, repeats: int) -> dict:
     """One path's figures: fixed-step and certified seconds (medians), states, queries, verdict."""
-    from scenes.fcl_certify import certifier
+    from scenes.collision.certify import certifier
     from suite.scoring.validate import VALIDATION_RESOLUTION_RAD
 
     cert = certifier(world)
@@ -62,7 +62,7 @@ def breakdown(items: list[tuple]) -> dict:
     around its calls (the rest is the bisection's own bookkeeping), the exact FCL queries, and the
     0.01 rad check on the judge's numpy world and on the planners' compiled one."""
     from planners.worlds import collision_world, planning_world
-    from scenes.fcl_certify import Certifier
+    from scenes.collision.certify import Certifier
     from suite.scoring.validate import VALIDATION_RESOLUTION_RAD
 
     spent = dict.fromkeys(PARTS, 0.0)
@@ -144,7 +144,7 @@ def between_samples_figure(items: list[tuple], rows: list[dict], png: str) -> st
     from pathlib import Path
 
     from planners.worlds import collision_world
-    from scenes.fcl_certify import certifier
+    from scenes.collision.certify import certifier
     from suite.report.plots_certify import plot_between_samples
     from suite.scoring.validate import VALIDATION_RESOLUTION_RAD
 

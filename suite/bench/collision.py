@@ -78,7 +78,7 @@ def _median_us(times_s: list[float]) -> float:
 
 
 def _bench_variant(variant: str, args: argparse.Namespace) -> dict:
-    from scenes.fcl_world import CollisionWorld
+    from scenes.collision.world import CollisionWorld
     from scenes.generate import generate_scene
     from scenes.spec import load_spec
 

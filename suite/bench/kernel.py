@@ -14,7 +14,7 @@ at its own gripper opening and at the other: open, or closed on the can), states
 Every state is decided by the numpy world (`states_free`, batched) and by the compiled one, both
 batched (`states_free`) and one at a time (`is_free`); every motion by both worlds'
 `motion_samples_free`. Any disagreement is a defect: the figures print them, and
-`tests/scenes/test_fcl_compiled.py` runs a small draw in the default test run and the full one
+`tests/scenes/collision/test_compiled.py` runs a small draw in the default test run and the full one
 (`-m slow`).
 
 `--near-contact` probes where uniform draws rarely land, the free/colliding boundary: bisected
@@ -114,8 +114,8 @@ def differential(*, states_per_world: int, motions_per_world: int, seed: int = 0
                  dataset: str = DEFAULT_DATASET, pick: int = 0, keep_examples: int = 5) -> Differential:
     """Decide the same states and motions with the numpy and the compiled world (see the module
     docstring); returns the counts and the seconds each spent."""
-    from scenes.fcl_compiled import CompiledWorld
-    from scenes.fcl_world import CollisionWorld
+    from scenes.collision.compiled import CompiledWorld
+    from scenes.collision.world import CollisionWorld
 
     perf = time.perf_counter
     out = Differential()

@@ -188,7 +188,7 @@ def measure(*, rounds: int, workload: Workload = WORKLOAD) -> dict[str, Any]:
     import pydrake.common  # noqa: F401  (it sets the "drake" logger's level on import: quiet it after)
 
     from planners.worlds import collision_world
-    from scenes.fcl_compiled import CompiledWorld
+    from scenes.collision.compiled import CompiledWorld
     from suite.bench.collision import drake_checker
 
     logging.getLogger("drake").setLevel(logging.WARNING)  # not Drake's line per checker about its contexts

@@ -16,7 +16,7 @@ import time
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from scenes.fcl_world import CollisionWorld
+from scenes.collision.world import CollisionWorld
 from scenes.generate import generate_scene
 from scenes.ik import Q_READY
 from scenes.spec import load_spec

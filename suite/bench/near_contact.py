@@ -1,9 +1,9 @@
 """`python -m suite bench kernel --near-contact`: the three collision deciders at the free/colliding
 boundary, each disagreement judged by a certified signed distance.
 
-The deciders, on the same world (`scenes.fcl_world`'s parts, obstacles and counting pairs):
-the compiled kernels (`scenes.fcl_compiled.CompiledWorld`, the planners'), the numpy reference
-(`scenes.fcl_world.CollisionWorld`, the judge's) and python-fcl alone (`fcl.collide` on every
+The deciders, on the same world (`scenes.collision.world`'s parts, obstacles and counting pairs):
+the compiled kernels (`scenes.collision.compiled.CompiledWorld`, the planners'), the numpy reference
+(`scenes.collision.world.CollisionWorld`, the judge's) and python-fcl alone (`fcl.collide` on every
 counting pair, placed by forward kinematics: no spheres, no tables).
 
 - Boundary states: a free and a colliding state (by one decider, each in turn) are bisected along
@@ -148,8 +148,8 @@ class Judge:
     """One world's three deciders and the certified signed distance of its states."""
 
     def __init__(self, scene, **kw) -> None:
-        from scenes.fcl_compiled import CompiledWorld
-        from scenes.fcl_world import CollisionWorld
+        from scenes.collision.compiled import CompiledWorld
+        from scenes.collision.world import CollisionWorld
 
         self.ref = CollisionWorld(scene, **kw)
         self.fast = CompiledWorld(scene, **kw)
@@ -184,11 +184,12 @@ class Judge:
 
     def compiled_by(self, q: np.ndarray) -> str:
         """Who gives the compiled world's answer for q: the kernel, or FCL on the pairs it left open."""
-        from scenes import fcl_kernel as K
+        from scenes.collision.kernel_codes import UNDECIDED
+        from scenes.collision.kernel_state import state_decide
 
         f = self.fast
-        code, _ = K.state_decide(np.ascontiguousarray(q, dtype=float), f._F, f._I, f._C)
-        return "fcl" if code == K.UNDECIDED else "kernel"
+        code, _ = state_decide(np.ascontiguousarray(q, dtype=float), f._F, f._I, f._C)
+        return "fcl" if code == UNDECIDED else "kernel"
 
     @staticmethod
     def samples(q0: np.ndarray, q1: np.ndarray, resolution_rad: float) -> np.ndarray:

@@ -5,7 +5,7 @@ time budget, the validator's resolution, the robot, the held can and every obsta
 primitive in the world frame), `schema.json` (`suite.exchange.schema`), the robot model files
 in `robot/` and a README saying what to send back. Obstacles are the scene spec's own primitives
 (`Obstacle.to_json`, as `python -m suite scene --json` prints them) plus the cans on the plate;
-which pairs are checked mirrors the python-fcl world (`scenes.fcl_world`).
+which pairs are checked mirrors the python-fcl world (`scenes.collision.world`).
 """
 
 from __future__ import annotations
@@ -155,7 +155,7 @@ def _obstacles(problem: PlanningProblem) -> list[dict[str, Any]]:
 
 def _self_collision_ignored(robot, held: bool) -> list[list[str]]:
     """Robot part pairs the python-fcl world does not check (as `CollisionWorld` filters them)."""
-    from scenes.fcl_world import GRIPPER_ASSEMBLY
+    from scenes.collision.world import GRIPPER_ASSEMBLY
 
     bodies = list(dict.fromkeys(s.body for s in robot.shapes)) + (["held_can"] if held else [])
     return [[a, b] for a, b in itertools.combinations(bodies, 2)

@@ -3,7 +3,7 @@ and speed and separation monitoring.
 
 The person is the scenario's standing cylinder (`scenes.moving_bin`: radius `person_radius_m`,
 from the floor plane z = 0 up to `person_height_m`), its axis wherever the caller says at each
-instant. The robot is the python-fcl world's own geometry (`scenes.fcl_world.CollisionWorld`'s
+instant. The robot is the python-fcl world's own geometry (`scenes.collision.world.CollisionWorld`'s
 parts: the arm's primitives, the gripper body, the fingers at an opening, a held can grown by the
 grasp's `held_margin_m`), placed by `RobotModel.link_poses`; distances are FCL's signed distances.
 
@@ -23,8 +23,8 @@ from typing import Callable
 import fcl
 import numpy as np
 
-from scenes.fcl_shapes import G_INDEX, aabb_half_extents, bounding_radius
-from scenes.fcl_world import robot_parts
+from scenes.collision.shapes import G_INDEX, aabb_half_extents, bounding_radius
+from scenes.collision.world import robot_parts
 from scenes.robot_model import load_robot
 from suite.execution.splice import stopping_blend
 

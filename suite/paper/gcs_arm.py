@@ -68,7 +68,7 @@ def task_configurations(scene) -> dict[str, np.ndarray]:
         SuiteError: an IK that fails, or a configuration in collision (the scene is not the paper's).
     """
     from scenes.drake_scene import build_drake_scene
-    from scenes.fcl_world import CollisionWorld
+    from scenes.collision.world import CollisionWorld
     from scenes.ik import paper_ik
     from scenes.robot_model import transform
 

@@ -176,7 +176,7 @@ def composition(records: Sequence[dict[str, Any]]) -> str:
     return line
 
 
-#: The exact verdicts of `scenes.fcl_certify`, in table order; "not checked": a record written
+#: The exact verdicts of `scenes.collision.certify`, in table order; "not checked": a record written
 #: before certification existed.
 VERDICTS = ("certified", "unproved", "collision")
 

@@ -70,7 +70,7 @@ def search_job(arg: tuple) -> dict[str, Any]:
     polishing made of it, and the shortest certified path."""
     from planners.registry import make_planner, planner_class
     from planners.worlds import collision_world, padded_worlds
-    from scenes.fcl_certify import certifier
+    from scenes.collision.certify import certifier
     from suite.run.trial import make_config
     from suite.scoring.validate import validate_path
 
@@ -297,7 +297,7 @@ def rereference_dataset(source: str, name: str, *, search_s: float = 20.0, rrt_s
 def refine_job(arg: tuple) -> dict[str, Any]:
     """`local_optimum` from a problem's stored reference (runs in a worker process)."""
     from planners.worlds import collision_world
-    from scenes.fcl_certify import certifier
+    from scenes.collision.certify import certifier
 
     problem, path, polish_s, trajopt_s = arg
     world = collision_world(problem)

@@ -8,7 +8,7 @@ Steps:
 3. Every problem gets a reference solution, the shortest valid path known: for a trivial problem
    the straight segment (no path is shorter) if it is certified; otherwise the best of a long
    AORRTC run and a few RRT-Connect runs, each shortened by OMPL's simplifier, accepted by the
-   validator and certified by the exact check (`scenes.fcl_certify`). A problem
+   validator and certified by the exact check (`scenes.collision.certify`). A problem
    no planner solves is left out (the dataset holds known-solvable problems only).
 4. Trivial problems are capped at `max_trivial_fraction` per family (those kept are chosen by
    hash, not by seed order); the others stay in the files as cycle steps (`benchmark: false`), not

@@ -6,7 +6,7 @@
 2. moves every interior waypoint a fraction `step` of the way towards the midpoint of its two
    neighbours. |x - a| + |x - b| is convex in x and least on the segment a-b, of which the
    midpoint is a point; so no move lengthens the path. A move is kept only if the exact segment
-   check (`scenes.fcl_certify`) certifies both of the waypoint's segments,
+   check (`scenes.collision.certify`) certifies both of the waypoint's segments,
 3. removes every interior waypoint whose neighbours are joined by a certified segment (a shortcut
    never lengthens a path: the triangle inequality).
 A round that shortens the path by less than `tol_rad` halves `step`; the search ends when `step`
@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from planners.base import resample_by_length  # noqa: F401 (moved to planners.base; still importable here)
-from scenes.fcl_certify import CERTIFIED
+from scenes.collision.certify import CERTIFIED
 
 #: The exact check's state budget for one move's two segments; an unproved move is refused.
 MOVE_MAX_STATES = 20_000

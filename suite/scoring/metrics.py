@@ -139,7 +139,7 @@ def score(
 
     Args:
         path: the validated joint path (N, 7), rad.
-        world: the problem's `scenes.fcl_world.CollisionWorld` (robot, held can, remaining cans).
+        world: the problem's `scenes.collision.world.CollisionWorld` (robot, held can, remaining cans).
         X_WG_goal: the target gripper pose (4, 4) the path should end at.
         timed: its TOPP-RA trajectory, if already computed (else computed here).
         timing_options: used when `timed` is None.

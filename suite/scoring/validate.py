@@ -23,7 +23,7 @@ MAX_CHECKED_STATES = 200_000
 
 def over_limit(path: np.ndarray) -> dict | None:
     """None if the judge takes the claimed path on, else which limit it passes: {limit, value, max}."""
-    from scenes.fcl_world import CollisionWorld
+    from scenes.collision.world import CollisionWorld
     from suite.scoring.polyline import simplify
 
     path = np.atleast_2d(np.asarray(path, float))
@@ -72,10 +72,10 @@ def validate_path(problem: PlanningProblem, path: np.ndarray | None, world) -> s
 
 
 def certify_path(path: np.ndarray, world) -> dict:
-    """The exact verdict of a path on the validator's world and pairs (`scenes.fcl_certify`), as
+    """The exact verdict of a path on the validator's world and pairs (`scenes.collision.certify`), as
     stored in a trial record's `certification`: verdict (certified, collision or unproved), the
     states and exact distance queries it took, seconds, and where a collision or an unproved
     segment lies."""
-    from scenes.fcl_certify import certifier
+    from scenes.collision.certify import certifier
 
     return certifier(world).certify(np.asarray(path, float)).as_record()

@@ -78,7 +78,7 @@ def test_world_holds_the_fixtures_the_cans_seen_and_the_loose_objects_as_boxes(c
 
 
 def test_the_robot_in_view_is_left_out_and_only_then(clutter):
-    from scenes.fcl_world import CollisionWorld
+    from scenes.collision.world import CollisionWorld
     from scenes.ik import Q_READY, PoseIk
     from scenes.drake_scene import build_drake_scene
     from scenes.grasp_rule import waypoint_pose

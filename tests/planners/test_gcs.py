@@ -176,7 +176,7 @@ class _BallWorld:
         self.center, self.radius = np.asarray(center, float), radius
 
     def interpolate(self, path, resolution_rad):
-        from scenes.fcl_world import CollisionWorld
+        from scenes.collision.world import CollisionWorld
 
         return CollisionWorld.interpolate(path, resolution_rad)
 

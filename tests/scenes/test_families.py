@@ -45,7 +45,7 @@ def test_station_is_feasible_and_cans_pickable_in_id_order(family):
 def test_everything_on_the_table_and_cans_apart_from_obstacles(family):
     import fcl
 
-    from scenes.fcl_shapes import fcl_geometry
+    from scenes.collision.shapes import fcl_geometry
 
     scene = family_scene(family, 4244)
     spec = scene.spec
@@ -187,7 +187,7 @@ def test_placement_shortcuts_give_the_plain_answers():
     # every candidate (cans near the distractors included)
     import fcl
 
-    from scenes.fcl_shapes import fcl_geometry
+    from scenes.collision.shapes import fcl_geometry
     from scenes.placement import (_clear_of_extras, _far_enough, _footprint_bounds, _footprint_corners,
                                  _footprint_distance, gripper_clear, _gripper_parts, _sample_can)
     from scenes.grasp_rule import truth_grasp

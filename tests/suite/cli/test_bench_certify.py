@@ -10,7 +10,7 @@ from suite.problems.dataset import load_dataset
 
 def test_breakdown_parts_add_up_to_the_check_and_leave_the_worlds_certifier_alone():
     from planners.worlds import collision_world
-    from scenes.fcl_certify import certifier
+    from scenes.collision.certify import certifier
 
     ds = load_dataset("recycle-v3:quick:family=window")
     items = [(p, ds.references[pid]) for pid, p in zip(ds.ids, ds.problems) if not ds.meta[pid]["trivial"]][:2]

@@ -9,7 +9,7 @@ from suite.paper.gcs_arm import TASK_POSES, _restriction_cost, region_paths, tas
 
 
 def test_the_task_poses_are_reached_by_the_papers_ik_recipe():
-    from scenes.fcl_world import CollisionWorld
+    from scenes.collision.world import CollisionWorld
     from scenes.robot_model import load_robot, rpy_to_matrix
     from suite.paper.gcs_arm import paper_scene
 

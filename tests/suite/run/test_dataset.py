@@ -256,7 +256,7 @@ def test_rereference_takes_every_best_known_from_the_offline_search_and_resumes(
 
 def test_polish_never_lengthens_and_keeps_every_segment_certified(small):
     from planners.worlds import collision_world
-    from scenes.fcl_certify import certifier
+    from scenes.collision.certify import certifier
     from suite.run.polish import path_length, polish
 
     d, _ = small

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from synthetic_runs import synthetic_records, write_run
 
-from scenes.fcl_world import CollisionWorld
+from scenes.collision.world import CollisionWorld
 from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp, waypoint_pose
 from scenes.identity_rule import CURRENT_RULE

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
-from scenes.fcl_world import CollisionWorld
+from scenes.collision.world import CollisionWorld
 from scenes.generate import generate_scene
 from scenes.ik import Q_READY
 from scenes.robot_model import load_robot

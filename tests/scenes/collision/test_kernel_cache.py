@@ -1,4 +1,4 @@
-"""numba's disk cache of the compiled kernels cannot go stale (`scenes.fcl_kernel_data`): it is keyed
+"""numba's disk cache of the compiled kernels cannot go stale (`scenes.collision.kernel_data`): it is keyed
 on the kernel modules' sources, found by module name, and on the field layout.
 
 The subprocess test copies the kernel modules out of the tree: a copy at another path loads the
@@ -21,13 +21,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenes import fcl_kernel_data as D
+from scenes.collision import kernel_data as D
 
 #: Run in a copy of the kernel modules: compile (or load) `fk_rows` on a packed world with
 #: distinct Mc, Ms and M1, and print where it is cached, whether it loaded, and the rows it maps.
 _PROBE = """
 import json, numpy as np
-import scenes.fcl_kernel as K, scenes.fcl_kernel_data as D
+import scenes.collision.kernel_state as K, scenes.collision.kernel_data as D
 rng = np.random.default_rng(4)
 fields = {k: np.zeros(0) for k in (*D.FLOAT_FIELDS, *D.INT_FIELDS, "tab_cells")}
 fields.update(Mc=rng.normal(size=112), Ms=rng.normal(size=112), M1=rng.normal(size=112), rows0=rng.normal(size=28),
@@ -42,24 +42,31 @@ print(json.dumps({"file": K.__file__, "key": D.KEY, "path": str(D.CACHE_PATH), "
 """
 
 
+#: The kernels' package, and its depth below the import root.
+_PACKAGE = D.__package__.split(".")
+
+
 def _copy_kernels(root: Path) -> Path:
-    """The package `scenes` with only its kernel modules, under `root` (found by module name)."""
-    pkg = root / "scenes"
+    """The kernels' package (`scenes.collision`, each level's `__init__`) with only its kernel
+    modules, under `root` (found by module name); returns the package's directory."""
+    pkg = root.joinpath(*_PACKAGE)
     pkg.mkdir(parents=True)
-    shutil.copy(importlib.util.find_spec("scenes").origin, pkg / "__init__.py")
+    for k in range(1, len(_PACKAGE) + 1):
+        shutil.copy(importlib.util.find_spec(".".join(_PACKAGE[:k])).origin, root.joinpath(*_PACKAGE[:k], "__init__.py"))
     for m in D.KERNEL_MODULES:
-        shutil.copy(importlib.util.find_spec(f"scenes.{m}").origin, pkg / f"{m}.py")
+        shutil.copy(importlib.util.find_spec(f"{D.__package__}.{m}").origin, pkg / f"{m}.py")
     return pkg
 
 
-def _probe(root: Path, cache: Path) -> dict:
+def _probe(pkg: Path, cache: Path) -> dict:
+    root = pkg.parents[len(_PACKAGE) - 1]
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NUMBA_CACHE_LOCATOR_CLASSES")}
     env["NUMBA_CACHE_DIR"] = str(cache)
     r = subprocess.run([sys.executable, "-c", _PROBE], cwd=root, env=env, capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout.strip().splitlines()[-1])
-    assert Path(out["file"]).resolve().parent == (root / "scenes").resolve()  # the copy, not the tree
+    assert Path(out["file"]).resolve().parent == pkg.resolve()  # the copy, not the tree
     return out
 
 
@@ -68,44 +75,45 @@ def test_a_moved_copy_loads_and_a_changed_layout_recompiles(tmp_path):
     first = _copy_kernels(tmp_path / "first")
     moved = _copy_kernels(tmp_path / "elsewhere" / "moved")
     changed = _copy_kernels(tmp_path / "changed")
-    src = (changed / "fcl_kernel_data.py").read_text()
+    src = (changed / "kernel_data.py").read_text()
     # the same fields, Mc and Ms swapped: every kernel must now read Ms at 0 and Mc at 1
     old_list, new_list = 'FLOAT_FIELDS = ("Mc", "Ms",', 'FLOAT_FIELDS = ("Ms", "Mc",'
     old_idx, new_idx = "(F_MC, F_MS,", "(F_MS, F_MC,"
     assert src.count(old_list) == 1 and src.count(old_idx) == 1
-    (changed / "fcl_kernel_data.py").write_text(src.replace(old_list, new_list).replace(old_idx, new_idx))
+    (changed / "kernel_data.py").write_text(src.replace(old_list, new_list).replace(old_idx, new_idx))
     # the kernel modules' own files are untouched: numba's own check (their stamps) would load them
-    assert (changed / "fcl_kernel.py").read_bytes() == (first / "fcl_kernel.py").read_bytes()
+    assert all((changed / f"{m}.py").read_bytes() == (first / f"{m}.py").read_bytes()
+               for m in ("kernel_state", "kernel_motion", "kernel_codes"))
 
-    a = _probe(first.parent, cache)
+    a = _probe(first, cache)
     assert (a["misses"], a["hits"]) == (1, 0)  # compiled
     assert a["cache_path"] == a["path"] == str(D.keyed_path(cache, a["key"]))
     assert a["key"] == D.KEY  # the copy's sources and layout are the tree's
-    assert any(Path(a["path"]).glob("fcl_kernel.fk_rows-*.nbi"))  # numba's index: written
+    assert any(Path(a["path"]).glob("kernel_state.fk_rows-*.nbi"))  # numba's index: written
     assert any(np.abs(a["rows"]) > 1e-3)
 
-    b = _probe(moved.parent, cache)
+    b = _probe(moved, cache)
     assert b["key"] == a["key"] and b["path"] == a["path"]  # other files, same modules: same key
     assert (b["misses"], b["hits"]) == (0, 1)  # loaded
     assert b["rows"] == a["rows"]
 
-    c = _probe(changed.parent, cache)
+    c = _probe(changed, cache)
     assert c["f_mc"] == 1 and a["f_mc"] == 0
     assert c["key"] != a["key"] and c["path"] != a["path"]
     assert (c["misses"], c["hits"]) == (1, 0)  # recompiled, not loaded
     assert c["rows"] == a["rows"]  # the layout moved, the rows did not
 
-    again = _probe(first.parent, cache)
+    again = _probe(first, cache)
     assert (again["misses"], again["hits"]) == (0, 1)  # the first key's cache is still there
 
     # the control: the same change with the key faked back to the first one loads the first
     # layout's code, which reads Ms as Mc (the stale cache the key prevents)
     stale = _copy_kernels(tmp_path / "stale")
-    faked = (changed / "fcl_kernel_data.py").read_text()
+    faked = (changed / "kernel_data.py").read_text()
     line = "KEY = cache_key(kernel_sources(), layout())"
     assert faked.count(line) == 1
-    (stale / "fcl_kernel_data.py").write_text(faked.replace(line, f"KEY = {a['key']!r}"))
-    s = _probe(stale.parent, cache)
+    (stale / "kernel_data.py").write_text(faked.replace(line, f"KEY = {a['key']!r}"))
+    s = _probe(stale, cache)
     assert (s["misses"], s["hits"]) == (0, 1) and s["f_mc"] == 1
     assert s["rows"] != a["rows"]
 
@@ -118,9 +126,9 @@ def test_the_key_covers_the_sources_and_the_layout():
     assert lay["F_MC"] == 0 and lay["I_OBS_TYPE"] == len(D.INT_FIELDS) - 1 and lay["SCR_WALL"] == 136
     assert lay["HEADER"] == D.HEADER and lay["S_NPP"] == 7 and lay["FLOAT_FIELDS"] == D.FLOAT_FIELDS
     assert D.cache_key(sources, {**lay, "SCR_WALL": 137}) != D.KEY
-    assert D.cache_key({**sources, "fcl_kernel": sources["fcl_kernel"] + "\n"}, lay) != D.KEY
-    with pytest.raises(RuntimeError, match="kernel module scenes.fcl_kernel_gone has no source"):
-        D.kernel_sources(("fcl_kernel_gone",))
+    assert D.cache_key({**sources, "kernel_state": sources["kernel_state"] + "\n"}, lay) != D.KEY
+    with pytest.raises(RuntimeError, match="kernel module scenes.collision.kernel_gone has no source"):
+        D.kernel_sources(("kernel_gone",))
 
 
 def test_kernels_read_no_module_outside_the_key():
@@ -131,7 +139,7 @@ def test_kernels_read_no_module_outside_the_key():
         tree = ast.parse(D.kernel_sources()[m])
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "scenes":
-                assert node.module in {f"scenes.{k}" for k in D.KERNEL_MODULES}, (m, node.module)
+                assert node.module in {f"{D.__package__}.{k}" for k in D.KERNEL_MODULES}, (m, node.module)
 
     def stray(x):
         return x

@@ -1,24 +1,31 @@
 """The compiled motion check (`motion_check`): the samples of a straight motion decided with the
-state kernel of `scenes.fcl_kernel`, the coarsest first, neighbours proved free by their distance
-bounds, resumable where FCL must decide a sample; as `MotionChecks._motion_samples_free` decides."""
+state kernel of `scenes.collision.kernel_state`, the coarsest first, neighbours proved free by their
+distance bounds, resumable where FCL must decide a sample; as `MotionChecks._motion_samples_free`
+decides. Where a check stands lives in its work array (`scenes.collision.kernel_codes.WORK`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from scenes.fcl_kernel import (
-    _TOUCHING,
-    _UNKNOWN,
+from scenes.collision.kernel_codes import (
     COLLIDES,
     FREE,
     NEED_SPACE,
+    PHASE_HEAD,
+    PHASE_REST,
+    PHASE_START,
+    TOUCHING,
     UNDECIDED,
-    _d2_all,
-    _table_cell,
-    fk_rows,
-    state_decide,
+    UNKNOWN,
+    WS_AT,
+    WS_HEAD,
+    WS_N,
+    WS_N_HEAD,
+    WS_PHASE,
+    WS_REACH,
+    WS_STATES,
 )
-from scenes.fcl_kernel_data import (
+from scenes.collision.kernel_data import (
     F_D2,
     F_LAM_PAIR,
     F_PAIR_R,
@@ -34,6 +41,7 @@ from scenes.fcl_kernel_data import (
     _i,
     _jit,
 )
+from scenes.collision.kernel_state import _d2_all, _table_cell, fk_rows, state_decide
 
 
 @_jit
@@ -56,16 +64,9 @@ def _reach(F, I, lam_pair, n):
     return np.int64(np.floor(best - 1e-9))
 
 
-#: Layout of a motion check's work array (int64): phase, position, n, states evaluated, head
-#: length, the head's sample indices, then the reach of q0 and of each head sample.
-WS_HEAD, WS_REACH = 5, 5 + 8
-WORK = WS_REACH + 9
-_START, _HEAD, _REST = 0, 1, 2
-
-
 @_jit
 def _head_order(n, ws):
-    """The motion's first samples, as `scenes.fcl_motion.check_order(n)[:8]`: the end n, then
+    """The motion's first samples, as `scenes.collision.motion.check_order(n)[:8]`: the end n, then
     1..n-1 coarsest first (by the power of two dividing them; ascending among equals)."""
     ws[WS_HEAD] = n
     k = 1
@@ -81,7 +82,7 @@ def _head_order(n, ws):
                 k += 1
             i += 2 * step
         level -= 1
-    ws[4] = k
+    ws[WS_N_HEAD] = k
 
 
 @_jit
@@ -94,16 +95,16 @@ def motion_check(q0, q1, resolution, F, I, C, todo, ws):
 
     Resumable: it returns at the first sample it leaves UNDECIDED (its rows and pairs in F and I,
     the pair count returned) and, called again with the same `ws`, continues after it; set
-    ws[0] = 0 to start a motion. Returns (FREE: the motion is free, COLLIDES, or UNDECIDED,
-    pairs); ws[3] counts the states evaluated."""
+    ws[WS_PHASE] = PHASE_START to start a motion. Returns (FREE: the motion is free, COLLIDES, or
+    UNDECIDED, pairs); ws[WS_STATES] counts the states evaluated."""
     P, Rt = I[S_P], I[S_RT]
     lam_pair = _f(F, I, F_LAM_PAIR)
     q = np.empty(7)
     d = np.empty(7)
     for j in range(7):
         d[j] = q1[j] - q0[j]
-    if ws[0] == _START:
-        ws[3] = 0
+    if ws[WS_PHASE] == PHASE_START:
+        ws[WS_STATES] = 0
         big = 0.0
         for j in range(7):
             if abs(d[j]) > big:
@@ -111,10 +112,10 @@ def motion_check(q0, q1, resolution, F, I, C, todo, ws):
         n = np.int64(np.ceil(big / resolution))
         if n < 1:
             n = 1
-        ws[2] = n
+        ws[WS_N] = n
         if n + 1 > len(todo):
-            return NEED_SPACE, 0  # the caller gives a `todo` of at least ws[2] + 1 and calls again
-        ws[1], ws[3] = 0, 1
+            return NEED_SPACE, 0  # the caller gives a `todo` of at least ws[WS_N] + 1 and calls again
+        ws[WS_AT], ws[WS_STATES] = 0, 1
         _head_order(n, ws)
         ia, pair_b = _i(I, I_IA), _i(I, I_PAIR_B)
         row_chain, pair_self = _f(F, I, F_ROW_CHAIN), _f(F, I, F_PAIR_SELF)
@@ -129,20 +130,20 @@ def motion_check(q0, q1, resolution, F, I, C, todo, ws):
         fk_rows(q0, F, I)  # q0: only its distances are wanted
         _d2_all(F, I)
         ws[WS_REACH] = _reach(F, I, lam_pair, n)
-        ws[0] = _HEAD
-    n, n_head = ws[2], ws[4]
-    if ws[0] == _HEAD:
-        for h in range(ws[1], n_head):
+        ws[WS_PHASE] = PHASE_HEAD
+    n, n_head = ws[WS_N], ws[WS_N_HEAD]
+    if ws[WS_PHASE] == PHASE_HEAD:
+        for h in range(ws[WS_AT], n_head):
             i = ws[WS_HEAD + h]
             for j in range(7):
                 q[j] = q0[j] + (i / n) * d[j]
-            ws[3] += 1
+            ws[WS_STATES] += 1
             code, count = state_decide(q, F, I, C)
             if code == COLLIDES:
                 return COLLIDES, 0
             ws[WS_REACH + 1 + h] = _reach(F, I, lam_pair, n)
             if code == UNDECIDED:
-                ws[1] = h + 1
+                ws[WS_AT] = h + 1
                 return UNDECIDED, count
         if n_head == n:
             return FREE, 0
@@ -163,24 +164,24 @@ def motion_check(q0, q1, resolution, F, I, C, todo, ws):
                 for t in range(len(tab_j)):
                     j = tab_j[t]
                     c = _table_cell(F, I, C, t, q0[j] + (m / n) * d[j])
-                    if c == _TOUCHING:
+                    if c == TOUCHING:
                         return COLLIDES, 0
-                    if c == _UNKNOWN:
+                    if c == UNKNOWN:
                         unknown = True
                 if unknown:
                     todo[m] = True
         todo[0] = False
         for h in range(n_head):
             todo[ws[WS_HEAD + h]] = False  # evaluated already
-        ws[0], ws[1] = _REST, 1
-    for m in range(ws[1], n + 1):
+        ws[WS_PHASE], ws[WS_AT] = PHASE_REST, 1
+    for m in range(ws[WS_AT], n + 1):
         if not todo[m]:
             continue
         for j in range(7):
             q[j] = q0[j] + (m / n) * d[j]
-        ws[3] += 1
+        ws[WS_STATES] += 1
         code, count = state_decide(q, F, I, C)
         if code != FREE:
-            ws[1] = m + 1
+            ws[WS_AT] = m + 1
             return code, count
     return FREE, 0

@@ -4,8 +4,8 @@ sphere tiers, the joint tables and the motion proof of `motion_samples_free`.
 A state is FREE (no sphere pair overlaps and every tabled pair's cell is proved apart), COLLIDES
 (an inner ball meets an obstacle or another part's inner ball, or a tabled pair's cell is proved
 touching) or UNDECIDED, with the part-level pairs that FCL's `collide` must decide; that stays in
-Python (`scenes.fcl_compiled.CompiledWorld`), counted per trial. The answers are the numpy path's
-(`scenes.fcl_world`); the bounds are sharper, which only decides more pairs without FCL:
+Python (`scenes.collision.compiled.CompiledWorld`), counted per trial. The answers are the numpy path's
+(`scenes.collision.world`); the bounds are sharper, which only decides more pairs without FCL:
 
 - a sphere's distance to an obstacle is exact for the obstacle's kind (a box in its own frame, a
   cylinder, a sphere), where the numpy path bounds every obstacle by its axis-aligned box (the
@@ -16,22 +16,33 @@ Python (`scenes.fcl_compiled.CompiledWorld`), counted per trial. The answers are
 
 No `fastmath`; the joint transforms are built from their three non-zero columns. A motion's
 samples are evaluated in one call, the coarsest first, resumable where FCL must decide a sample.
-The differential check (`python -m suite bench kernel`, `tests/scenes/test_fcl_compiled.py`)
+The differential check (`python -m suite bench kernel`, `tests/scenes/collision/test_compiled.py`)
 compares the answers with the numpy path's; at the boundary (`--near-contact`) they differ only
 at overlaps under 1e-6 m, where FCL's `collide` decides for one of them and misses some.
 
-Compiled once per machine into numba's disk cache (`scenes.fcl_kernel_data`); the motion check is
-`scenes.fcl_kernel_motion`.
+Compiled once per machine into numba's disk cache (`scenes.collision.kernel_data`); the decision
+codes are `scenes.collision.kernel_codes`; the motion check (`scenes.collision.kernel_motion`) calls
+this state kernel, and `scenes.collision.compiled.compile_kernels` warms both.
 """
 
 from __future__ import annotations
 
-import logging
-import time
-
 import numpy as np
 
-from scenes.fcl_kernel_data import (
+from scenes.collision.kernel_codes import (
+    AABB,
+    APART,
+    APART_PAIR,
+    COLLIDES,
+    CYLINDER,
+    FREE,
+    OBB,
+    SPHERE,
+    TOUCHING,
+    UNDECIDED,
+    UNKNOWN,
+)
+from scenes.collision.kernel_data import (
     F_D2,
     F_FINE_IN2,
     F_FINE_OUT2,
@@ -51,7 +62,6 @@ from scenes.fcl_kernel_data import (
     F_TAB_INV,
     F_TAB_LO,
     F_TAB_N,
-    FLOAT_FIELDS,
     I_FINE_START,
     I_IA,
     I_IB,
@@ -66,8 +76,6 @@ from scenes.fcl_kernel_data import (
     I_S_ROW,
     I_TAB_J,
     I_TAB_K,
-    INT_FIELDS,
-    pack,
     S_NENV,
     S_NPP,
     S_O,
@@ -77,23 +85,10 @@ from scenes.fcl_kernel_data import (
     SCR_W,
     SCR_WALL,
     SCRATCH,
-    CACHE_PATH,
     _f,
     _i,
     _jit,
 )
-
-log = logging.getLogger(__name__)
-
-#: Decisions of a state (and a motion check's request for a larger work array).
-FREE, COLLIDES, UNDECIDED, NEED_SPACE = 0, 1, 2, 4
-#: Table cell values (as `scenes.fcl_tables`).
-_UNKNOWN, _APART, _TOUCHING = 0, 1, 2
-#: A scene pair the fine spheres prove apart.
-_APART_PAIR = 3
-#: Obstacle kinds, each with its exact point distance: an axis-aligned box, a box, a cylinder
-#: (axis z of its frame), a sphere.
-AABB, OBB, CYLINDER, SPHERE = 0, 1, 2, 3
 
 
 @_jit
@@ -260,7 +255,7 @@ def _table_cell(F, I, C, t, qj):
     x = (qj - _f(F, I, F_TAB_LO)[t]) * _f(F, I, F_TAB_INV)[t]
     if 0.0 <= x < _f(F, I, F_TAB_N)[t]:
         return C[t * I[S_TABW] + int(x)]
-    return _UNKNOWN
+    return UNKNOWN
 
 
 @_jit
@@ -283,7 +278,7 @@ def _fine_pair(F, I, part, o):
             if d2 < in2[s]:
                 return COLLIDES
             hit = True
-    return UNDECIDED if hit else _APART_PAIR
+    return UNDECIDED if hit else APART_PAIR
 
 
 @_jit
@@ -296,9 +291,9 @@ def state_decide(q, F, I, C):
     tab_j, tab_k = _i(I, I_TAB_J), _i(I, I_TAB_K)
     for t in range(len(tab_j)):
         c = _table_cell(F, I, C, t, q[tab_j[t]])
-        if c == _TOUCHING:
+        if c == TOUCHING:
             return COLLIDES, 0
-        if c != _APART:
+        if c != APART:
             marks[tab_k[t]] = True
     fk_rows(q, F, I)
     _d2_all(F, I)
@@ -315,7 +310,7 @@ def state_decide(q, F, I, C):
             r = _fine_pair(F, I, pp_part[k], o)
             if r == COLLIDES:
                 return COLLIDES, 0
-            if r == _APART_PAIR:
+            if r == APART_PAIR:
                 marks[k] = False
     pairs = _i(I, I_PAIRS)
     count = 0
@@ -340,33 +335,3 @@ def batch_decide(Q, stop_at_first, F, I, C):
         if code == COLLIDES and stop_at_first:
             break
     return out
-
-
-_WARM: dict[str, float] = {}
-
-
-def compile_kernels() -> float:
-    """Compile (or load from the disk cache) every kernel once in this process, on a tiny world;
-    returns the seconds it took (0 after the first call). Called when a compiled world is built,
-    so that the compile is set-up time, never planning time."""
-    if "s" in _WARM:
-        return 0.0
-    t = time.perf_counter()
-    fields = {k: np.zeros(0) for k in (*FLOAT_FIELDS, *INT_FIELDS, "tab_cells")}
-    fields.update(Mc=np.zeros(112), Ms=np.zeros(112), M1=np.zeros(112), rows0=np.zeros(8), rows=np.zeros(9),
-                  obs_ctr=np.zeros(3), obs_half=np.zeros(3), obs_rot=np.zeros(9), sph=np.zeros(3), R2=np.full(2, -1.0), rho2=np.full(2, -1.0),
-                  row_chain=np.zeros(21), pair_r=np.zeros(2), pair_self=np.zeros(2), d2=np.zeros(2),
-                  scratch=np.zeros(SCRATCH), link_end=np.array([0, 1, 1, 1, 1, 1, 1, 1]), s_row=np.zeros(1),
-                  ia=np.zeros(2), ib=np.zeros(2), pp=np.zeros(2), pair_b=np.zeros(2), pair_counts=np.zeros(2),
-                  pairs=np.zeros(1), is_frame=np.zeros(2), lam_pair=np.zeros(2), pp_part=np.zeros(1),
-                  pp_obs=np.full(1, -1), part_link=np.ones(1), fine_start=np.zeros(2), obs_type=np.zeros(1))
-    F, I, C = pack(fields, (2, 3, 1, 2, 0, 1, 1, 1))
-    q = np.zeros(7)
-    state_decide(q, F, I, C)
-    batch_decide(np.zeros((1, 7)), True, F, I, C)
-    from scenes.fcl_kernel_motion import WORK, motion_check
-
-    motion_check(q, np.ones(7), 0.5, F, I, C, np.zeros(4, np.bool_), np.zeros(WORK, np.int64))
-    _WARM["s"] = time.perf_counter() - t
-    log.debug("fcl kernels ready in %.2f s (cache %s)", _WARM["s"], CACHE_PATH)
-    return _WARM["s"]

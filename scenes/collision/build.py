@@ -1,4 +1,4 @@
-"""Building `scenes.fcl_world.CollisionWorld`'s arrays once per world: the homogeneous rows in link
+"""Building `scenes.collision.world.CollisionWorld`'s arrays once per world: the homogeneous rows in link
 frames (hand first), the sphere-level pairs with the scene and between robot parts, the joint
 tables as arrays, and the forward-kinematics buffers. A mixin: `CollisionWorld.__init__` calls
 these after it has its parts and obstacles."""
@@ -8,8 +8,8 @@ from __future__ import annotations
 import fcl
 import numpy as np
 
-from scenes.fcl_shapes import Part, cover_spheres
-from scenes.fcl_tables import TABLE_MARGIN_M, UNKNOWN, on_axis, pair_table
+from scenes.collision.shapes import Part, cover_spheres
+from scenes.collision.joint_tables import TABLE_MARGIN_M, UNKNOWN, on_axis, pair_table
 
 #: Spacing of the spheres covering a cylinder or capsule along its axis, as a fraction of its
 #: radius (outer radius sqrt(1 + f^2 / 4) r: 7% above r for f = 0.75), for pairs with the scene

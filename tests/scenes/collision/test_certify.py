@@ -7,8 +7,8 @@ import functools
 import numpy as np
 import pytest
 
-from scenes.fcl_certify import CERTIFIED, COLLISION, UNPROVED, certifier, point_axis_radii
-from scenes.fcl_world import CollisionWorld
+from scenes.collision.certify import CERTIFIED, COLLISION, UNPROVED, certifier, point_axis_radii
+from scenes.collision.world import CollisionWorld
 from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp
 from scenes.scene import HeldCan

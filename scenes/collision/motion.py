@@ -1,7 +1,7 @@
-"""The motion checks of `scenes.fcl_world.CollisionWorld`: straight joint-space motions sampled at
+"""The motion checks of `scenes.collision.world.CollisionWorld`: straight joint-space motions sampled at
 a joint resolution, checked sample by sample (`motion_free`, `path_free`, the validator's rule) or
 with proved skips (`motion_samples_free`, the planners' check: the same answers, fewer states).
-A mixin: it works on the world's rows, pairs and joint tables (`scenes.fcl_build`)."""
+A mixin: it works on the world's rows, pairs and joint tables (`scenes.collision.build`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from time import perf_counter as _clock
 
 import numpy as np
 
-from scenes.fcl_tables import APART, TOUCHING, UNKNOWN
+from scenes.collision.joint_tables import APART, TOUCHING, UNKNOWN
 
 #: States per chunk in the batched checks (bounds memory; a colliding early chunk ends the scan).
 CHUNK = 64
@@ -138,7 +138,7 @@ class MotionChecks:
         """Per world row (robot rows, then obstacle centres: 0), bounds (7,) on each joint's lever
         arm on that point over every configuration (`point_axis_radii`); built once."""
         if self._row_chain is None:
-            from scenes.fcl_certify import point_axis_radii
+            from scenes.collision.certify import point_axis_radii
 
             e = self._link_end
             chain = np.zeros((len(self._world0), 7))

@@ -1,4 +1,4 @@
-"""The compiled checks (`scenes.fcl_compiled`) decide exactly as the numpy reference does.
+"""The compiled checks (`scenes.collision.compiled`) decide exactly as the numpy reference does.
 
 The default run draws a small differential check over every family of recycle-v3 (held cans,
 both gripper openings, states past the joint limits); `-m slow` runs it at full size (1,000,000
@@ -16,7 +16,7 @@ import pytest
 
 from scenes.errors import SuiteError
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def _assert_no_disagreement(d):
@@ -51,8 +51,8 @@ def test_the_full_differential_draw_has_no_disagreement():
 
 @pytest.fixture(scope="module")
 def worlds():
-    from scenes.fcl_compiled import CompiledWorld
-    from scenes.fcl_world import CollisionWorld
+    from scenes.collision.compiled import CompiledWorld
+    from scenes.collision.world import CollisionWorld
     from suite.bench.kernel import draw_worlds
 
     family, p, points = next(w for w in draw_worlds() if w[0] == "window" and w[1].held is not None)
@@ -83,7 +83,7 @@ def test_a_state_in_an_undecided_pair_goes_to_fcl_and_is_counted(worlds):
 
 def test_the_checker_switch(monkeypatch):
     from planners.worlds import CHECKER_ENV, collision_world, planning_world
-    from scenes.fcl_compiled import CompiledWorld
+    from scenes.collision.compiled import CompiledWorld
     from suite.problems.dataset import load_dataset
 
     p = load_dataset("recycle-v3:quick").problems[0]
@@ -98,7 +98,7 @@ def test_the_checker_switch(monkeypatch):
 
 
 def test_no_writable_cache_directory_means_compiling_in_memory(tmp_path):
-    from scenes.fcl_kernel_data import cache_dir
+    from scenes.collision.kernel_data import cache_dir
 
     blocked = tmp_path / "file"
     blocked.write_text("")  # a file where a directory should be: not creatable
@@ -109,7 +109,7 @@ def test_no_writable_cache_directory_means_compiling_in_memory(tmp_path):
 def test_worker_processes_compiling_at_once_share_one_cache(tmp_path):
     """Two processes start together on an empty cache (as a run's workers do on a fresh machine):
     both compile or load without error and decide alike; the cache is then filled."""
-    code = ("import numpy as np; from scenes.fcl_compiled import CompiledWorld; "
+    code = ("import numpy as np; from scenes.collision.compiled import CompiledWorld; "
             "from suite.problems.dataset import load_dataset; p = load_dataset('recycle-v3:quick').problems[0]; "
             "w = CompiledWorld(p.scene, gripper_opening_m=p.gripper_opening_m, held=p.held, "
             "removed_can_ids=p.removed_can_ids); Q = w.robot.random_configurations(np.random.default_rng(0), 300); "

@@ -1,11 +1,11 @@
-"""The compiled checks' data and set-up (`scenes.fcl_kernel`): the world's arrays packed into three
-buffers and their layout, the decorator every kernel is compiled with, and numba's disk cache of
-the kernels, keyed so that it cannot go stale.
+"""The compiled checks' data and set-up (`scenes.collision.kernel_state`): the world's arrays packed
+into three buffers and their layout, the decorator every kernel is compiled with, and numba's disk
+cache of the kernels, keyed so that it cannot go stale.
 
-numba freezes the globals a kernel reads (the field indices F_*, I_*, S_*, SCR_* below) into its
-cached code and invalidates a cached function only when its own file changes: an edit of the
-field list here would leave the kernels of `scenes.fcl_kernel` and `scenes.fcl_kernel_motion`
-reading the wrong fields. So the cache is keyed on `KEY`, a hash of the kernel modules' sources
+numba freezes the globals a kernel reads (the field indices F_*, I_*, S_*, SCR_* below, the codes
+of `scenes.collision.kernel_codes`) into its cached code and invalidates a cached function only
+when its own file changes: an edit of the field list here would leave the kernels of
+`scenes.collision.kernel_state` and `scenes.collision.kernel_motion` reading the wrong fields. So the cache is keyed on `KEY`, a hash of the kernel modules' sources
 (`KERNEL_MODULES`, found by module name through importlib, not by path: the files may move) and of
 the field layout (`layout()`): every kernel's cache lives under `fcl-kernels-<KEY[:16]>` in the
 cache directory, with `KEY` as numba's source stamp. Another key is another directory; the same
@@ -60,7 +60,7 @@ SCR_LT, SCR_W, SCR_V, SCR_WALL, SCRATCH = 0, 112, 124, 136, 220
 
 #: The modules whose kernels the cache holds (by name, within this package). A kernel compiled
 #: with `_jit` in any other module is refused at import: its sources would not be in the key.
-KERNEL_MODULES = ("fcl_kernel_data", "fcl_kernel", "fcl_kernel_motion")
+KERNEL_MODULES = ("kernel_codes", "kernel_data", "kernel_state", "kernel_motion")
 
 
 def layout() -> dict[str, object]:

@@ -11,7 +11,7 @@ import itertools
 import fcl
 import numpy as np
 
-from scenes.fcl_shapes import Prim, bounding_radius, fcl_geometry
+from scenes.collision.shapes import Prim, bounding_radius, fcl_geometry
 from scenes.robot_model import RobotModel
 
 #: Cells of a self-pair table over its one joint.

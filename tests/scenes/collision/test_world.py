@@ -8,8 +8,8 @@ import fcl
 import numpy as np
 import pytest
 
-from scenes import fcl_build, fcl_motion, fcl_shapes, fcl_tables
-from scenes.fcl_world import CollisionWorld
+from scenes.collision import build, joint_tables, motion, shapes
+from scenes.collision.world import CollisionWorld
 from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp
 from scenes.scene import HeldCan
@@ -199,7 +199,7 @@ def test_a_motion_is_checked_end_first_and_its_samples_cover_it():
     """`check_order`: the motion's samples as `motion_samples_free` takes them, the end first."""
     q0, q1 = np.zeros(7), np.linspace(-0.3, 0.7, 7)
     n = 14  # ceil(0.7 / 0.05): the last joint moves most
-    order = fcl_motion.check_order(n)
+    order = motion.check_order(n)
     Q = q0 + (order / n)[:, None] * (q1 - q0)
     assert np.array_equal(Q[0], q1)
     steps = np.sort(Q[:, -1])
@@ -214,31 +214,31 @@ def test_joint_tables_are_sound():
     assert world._tables, "the wrist pairs should have tables"
     Q = world.robot.random_configurations(np.random.default_rng(103), 1500)
     req = fcl.DistanceRequest(enable_signed_distance=True)
-    decided = {fcl_tables.APART: 0, fcl_tables.TOUCHING: 0}
+    decided = {joint_tables.APART: 0, joint_tables.TOUCHING: 0}
     for q in Q:
         ql = q.tolist()
         rows = world._state_rows(q)
         for j, lo, inv, n, cells, k in world._tables:
             x = (ql[j] - lo) * inv
-            c = cells[int(x)] if 0.0 <= x < n else fcl_tables.UNKNOWN
-            if c == fcl_tables.UNKNOWN:
+            c = cells[int(x)] if 0.0 <= x < n else joint_tables.UNKNOWN
+            if c == joint_tables.UNKNOWN:
                 continue
             a = world._place(world._pp_part[k], rows)
             b = world._place(world._pp_other[k][0], rows)
-            if c == fcl_tables.APART:
+            if c == joint_tables.APART:
                 assert fcl.distance(a, b, req, fcl.DistanceResult()) > 0
             else:
                 assert fcl.collide(a, b, fcl.CollisionRequest(), fcl.CollisionResult())
             decided[c] += 1
-    assert decided[fcl_tables.APART] > len(Q) and decided[fcl_tables.TOUCHING] > 20
+    assert decided[joint_tables.APART] > len(Q) and decided[joint_tables.TOUCHING] > 20
 
 
 @pytest.mark.parametrize("kind,dims", [("box", (0.146, 0.0725, 0.05)), ("box", (0.012, 0.082, 0.02)),
                                        ("capsule", (0.095, 0.2155)), ("cylinder", (0.065, 0.05)),
                                        ("cylinder", (0.033, 0.122)), ("sphere", (0.05,))])
-@pytest.mark.parametrize("spacing", [fcl_build.ENV_SPACING, fcl_build.SELF_SPACING])
+@pytest.mark.parametrize("spacing", [build.ENV_SPACING, build.SELF_SPACING])
 def test_cover_spheres_enclose_and_inner_balls_lie_inside(kind, dims, spacing):
-    centres, outer, inner = fcl_shapes.cover_spheres(kind, dims, spacing)
+    centres, outer, inner = shapes.cover_spheres(kind, dims, spacing)
     rng = np.random.default_rng(104)
 
     def inside(p):  # points (N, 3) in the shape frame

@@ -24,7 +24,7 @@ eta, in three tiers, cheapest first:
    radii is a lower bound, and it changes along the segment by at most the sphere centre's own
    lambda, sharper than the whole body's. A body pair is proved on a segment when every one of its
    sphere pairs is.
-2. Joint tables (`scenes.fcl_tables`): a self pair whose distance depends on one joint only is
+2. Joint tables (`scenes.collision.joint_tables`): a self pair whose distance depends on one joint only is
    proved apart cell by cell; a segment whose joint interval stays in proved cells is free.
 3. Proved distances between the two primitives at both ends, with the body pair's lambda (the
    largest over its spheres, plus their radius). FCL's GJK distance is only an estimate (seen
@@ -48,8 +48,8 @@ from typing import Any
 import fcl
 import numpy as np
 
-from scenes.fcl_shapes import fcl_geometry, grown_dims
-from scenes.fcl_tables import APART
+from scenes.collision.shapes import fcl_geometry, grown_dims
+from scenes.collision.joint_tables import APART
 
 #: Bisection stops on a segment shorter than this (max-norm, rad): the pair is `unproved` there.
 FLOOR_RAD = 1e-6

@@ -47,10 +47,10 @@ from time import perf_counter as _clock
 import fcl
 import numpy as np
 
-from scenes.fcl_build import WorldBuild
-from scenes.fcl_motion import CHUNK, MotionChecks
-from scenes.fcl_shapes import G_INDEX, Part, aabb_half_extents, fcl_geometry, grown_dims
-from scenes.fcl_tables import APART, TOUCHING, UNKNOWN
+from scenes.collision.build import WorldBuild
+from scenes.collision.motion import CHUNK, MotionChecks
+from scenes.collision.shapes import G_INDEX, Part, aabb_half_extents, fcl_geometry, grown_dims
+from scenes.collision.joint_tables import APART, TOUCHING, UNKNOWN
 from scenes.robot_model import RobotModel, load_robot
 from scenes.scene import HeldCan, Scene
 
@@ -77,7 +77,7 @@ def robot_parts(robot, opening_m: float, held_can: tuple | None = None) -> list[
 
 class CollisionWorld(WorldBuild, MotionChecks):
     """Robot + scene collision queries with python-fcl (the numpy reference path; the planners'
-    compiled path is `scenes.fcl_compiled.CompiledWorld`, which decides the same).
+    compiled path is `scenes.collision.compiled.CompiledWorld`, which decides the same).
 
     Args:
         scene: the scene (static boxes from its spec, cans as cylinders).
