@@ -341,7 +341,7 @@ def near_contact(*, pairs_per_world: int, brackets_per_world: int, seed: int = 0
                  pick: int = 0, tol_rad: float = 1e-9, bracket_sample: int = 6, families=None,
                  worlds: list | None = None) -> NearContact:
     """The near-contact draw on the worlds of `draw_worlds(dataset, pick)` (or `worlds`)."""
-    from suite.bench.kernel import draw_worlds
+    from suite.bench.kernel_worlds import draw_worlds
 
     t_start = time.perf_counter()
     out = NearContact(tol_rad=tol_rad)

@@ -71,7 +71,7 @@ def test_a_disagreement_is_classified_by_its_bounds():
 
 
 def test_a_tiny_near_contact_draw_disagrees_only_near_contact():
-    from suite.bench.kernel import draw_worlds
+    from suite.bench.kernel_worlds import draw_worlds
 
     worlds = [w for w in draw_worlds() if w[0] in ("window", "clutter")][:3]
     nc = near_contact(pairs_per_world=6, brackets_per_world=1, seed=5, worlds=worlds, bracket_sample=3)
