@@ -6,17 +6,10 @@ states and 100,000 motions; also `python -m suite bench kernel`)."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from scenes.errors import SuiteError
-
-ROOT = Path(__file__).resolve().parents[3]
 
 
 def _assert_no_disagreement(d):
@@ -27,7 +20,8 @@ def _assert_no_disagreement(d):
 
 
 def test_a_small_differential_draw_has_no_disagreement():
-    from suite.bench.kernel import differential, draw_worlds
+    from suite.bench.kernel import differential
+    from suite.bench.kernel_worlds import draw_worlds
 
     worlds = draw_worlds()
     families = {f for f, _, _ in worlds}
@@ -41,7 +35,8 @@ def test_a_small_differential_draw_has_no_disagreement():
 
 @pytest.mark.slow
 def test_the_full_differential_draw_has_no_disagreement():
-    from suite.bench.kernel import differential, draw_worlds
+    from suite.bench.kernel import differential
+    from suite.bench.kernel_worlds import draw_worlds
 
     n = len(draw_worlds())
     d = differential(states_per_world=-(-1_000_000 // n), motions_per_world=-(-100_000 // n), seed=0)
@@ -53,7 +48,7 @@ def test_the_full_differential_draw_has_no_disagreement():
 def worlds():
     from scenes.collision.compiled import CompiledWorld
     from scenes.collision.world import CollisionWorld
-    from suite.bench.kernel import draw_worlds
+    from suite.bench.kernel_worlds import draw_worlds
 
     family, p, points = next(w for w in draw_worlds() if w[0] == "window" and w[1].held is not None)
     kw = dict(gripper_opening_m=p.gripper_opening_m, held=p.held, removed_can_ids=p.removed_can_ids)
@@ -104,20 +99,3 @@ def test_no_writable_cache_directory_means_compiling_in_memory(tmp_path):
     blocked.write_text("")  # a file where a directory should be: not creatable
     assert cache_dir([blocked / "numba"]) is None
     assert cache_dir([blocked / "numba", tmp_path / "ok"]) == tmp_path / "ok"
-
-
-def test_worker_processes_compiling_at_once_share_one_cache(tmp_path):
-    """Two processes start together on an empty cache (as a run's workers do on a fresh machine):
-    both compile or load without error and decide alike; the cache is then filled."""
-    code = ("import numpy as np; from scenes.collision.compiled import CompiledWorld; "
-            "from suite.problems.dataset import load_dataset; p = load_dataset('recycle-v3:quick').problems[0]; "
-            "w = CompiledWorld(p.scene, gripper_opening_m=p.gripper_opening_m, held=p.held, "
-            "removed_can_ids=p.removed_can_ids); Q = w.robot.random_configurations(np.random.default_rng(0), 300); "
-            "print(int(w.states_free(Q).sum()))")
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    procs = [subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True) for _ in range(2)]
-    outs = [p.communicate(timeout=600) for p in procs]
-    assert [p.returncode for p in procs] == [0, 0], [e for _, e in outs]
-    assert outs[0][0] == outs[1][0]
-    assert any((tmp_path / "cache").rglob("*.nbi"))  # numba's index files: the next process loads them

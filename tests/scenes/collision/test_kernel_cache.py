@@ -4,7 +4,11 @@ on the kernel modules' sources, found by module name, and on the field layout.
 The subprocess test copies the kernel modules out of the tree: a copy at another path loads the
 cache (the key follows the modules, not the files), a copy whose field layout was reordered
 recompiles, and both give the same rows; the same change with its key faked back to the first
-loads the first layout's code and maps other rows (the control: the test sees a stale cache)."""
+loads the first layout's code and maps other rows (the control: the test sees a stale cache).
+
+The cold-cache test runs the tree's kernels (`scenes/collision/`) in worker processes on an empty
+cache: they compile into it under the kernel modules' own names, decide states and motions as the
+numpy reference does, and a later process loads every kernel without compiling."""
 
 from __future__ import annotations
 
@@ -22,6 +26,89 @@ import numpy as np
 import pytest
 
 from scenes.collision import kernel_data as D
+
+#: The repository (the tree's kernels, not a copy).
+ROOT = Path(__file__).resolve().parents[3]
+
+#: Run in the tree on a problem's world: decide states and motions with the compiled world, and
+#: print them with each kernel's file, cache path, cache misses and hits.
+_DECIDE = """
+import json, numpy as np
+from scenes.collision import compiled, kernel_data, kernel_motion, kernel_state
+from suite.problems.dataset import load_dataset
+p = load_dataset("recycle-v3:quick").problems[0]
+w = compiled.CompiledWorld(p.scene, gripper_opening_m=p.gripper_opening_m, held=p.held,
+                           removed_can_ids=p.removed_can_ids)
+rng = np.random.default_rng(0)
+Q = w.robot.random_configurations(rng, 300)
+M = [(Q[i], Q[i] + rng.normal(size=7) * 0.3) for i in range(40)]
+kernels = {"kernel_state.state_decide": kernel_state.state_decide, "kernel_state.batch_decide": kernel_state.batch_decide,
+           "kernel_motion.motion_check": kernel_motion.motion_check, "kernel_data._f": kernel_data._f}
+print(json.dumps({
+    "Q": Q.tolist(), "M": [[a.tolist(), b.tolist()] for a, b in M],
+    "states": w.states_free(Q).tolist(), "single": [bool(w.is_free(q)) for q in Q],
+    "motions": [bool(w.motion_samples_free(a, b, resolution_rad=0.05)) for a, b in M],
+    "key": kernel_data.KEY,
+    "kernels": {k: {"file": f.py_func.__code__.co_filename, "cache_path": f.stats.cache_path,
+                    "misses": sum(f.stats.cache_misses.values()), "hits": sum(f.stats.cache_hits.values())}
+                for k, f in kernels.items()}}))
+"""
+
+
+def _decide(cache: Path, n: int) -> list[dict]:
+    """`_DECIDE` in n worker processes started together on the cache directory `cache`."""
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_LOCATOR_CLASSES",)}
+    env["NUMBA_CACHE_DIR"] = str(cache)
+    procs = [subprocess.Popen([sys.executable, "-c", _DECIDE], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for _ in range(n)]
+    outs = [p.communicate(timeout=600) for p in procs]
+    assert [p.returncode for p in procs] == [0] * n, [e for _, e in outs]
+    return [json.loads(o.strip().splitlines()[-1]) for o, _ in outs]
+
+
+def test_the_kernels_compile_from_a_cold_cache_and_decide_as_the_reference(tmp_path):
+    """Two workers start together on an empty cache (a run on a fresh machine, or after the kernels
+    moved): both compile or load the kernels of `scenes/collision/` without error, under the key
+    and the modules' own names, and decide every state and motion as the numpy world; a third
+    process then loads every kernel and compiles none."""
+    from scenes.collision.world import CollisionWorld
+    from suite.problems.dataset import load_dataset
+
+    cache = tmp_path / "cache"  # cold: nothing there yet
+    cold = _decide(cache, 2)
+    warm = _decide(cache, 1)[0]
+    keyed = str(D.keyed_path(cache, D.KEY))
+    for out in (*cold, warm):
+        assert out["key"] == D.KEY
+        for name, k in out["kernels"].items():
+            assert Path(k["file"]).resolve() == (ROOT / "scenes" / "collision" / f"{name.split('.')[0]}.py").resolve()
+            assert k["cache_path"] == keyed, name
+    for name in cold[0]["kernels"]:  # compiled by one worker at least; the warm process compiles none
+        assert sum(o["kernels"][name]["misses"] for o in cold) >= 1, name
+        assert warm["kernels"][name]["misses"] == 0, name
+    # the entry points are each loaded or compiled by every worker (`_f` lives inside their code)
+    for name in ("kernel_state.state_decide", "kernel_state.batch_decide", "kernel_motion.motion_check"):
+        assert all(o["kernels"][name]["misses"] + o["kernels"][name]["hits"] >= 1 for o in cold), name
+        assert warm["kernels"][name]["hits"] >= 1, name
+    # numba's index files carry the kernel modules' new names, and only theirs
+    index = sorted(f.name.split("-")[0] for f in Path(keyed).glob("*.nbi"))
+    assert {"kernel_state.state_decide", "kernel_state.batch_decide", "kernel_motion.motion_check",
+            "kernel_data._f"} <= set(index)
+    assert all(n.split(".")[0] in D.KERNEL_MODULES for n in index), index
+
+    # the same answers in every process, and the numpy reference's
+    p = load_dataset("recycle-v3:quick").problems[0]
+    ref = CollisionWorld(p.scene, gripper_opening_m=p.gripper_opening_m, held=p.held,
+                         removed_can_ids=p.removed_can_ids)
+    Q = np.array(warm["Q"])
+    states = ref.states_free(Q).tolist()
+    motions = [bool(ref.motion_samples_free(np.array(a), np.array(b), resolution_rad=0.05)) for a, b in warm["M"]]
+    assert 0 < sum(states) < len(states) and 0 < sum(motions) < len(motions)  # both answers occur
+    for out in (*cold, warm):
+        assert out["Q"] == warm["Q"] and out["M"] == warm["M"]
+        assert out["states"] == states and out["single"] == states
+        assert out["motions"] == motions
+
 
 #: Run in a copy of the kernel modules: compile (or load) `fk_rows` on a packed world with
 #: distinct Mc, Ms and M1, and print where it is cached, whether it loaded, and the rows it maps.
@@ -127,7 +214,7 @@ def test_the_key_covers_the_sources_and_the_layout():
     assert lay["HEADER"] == D.HEADER and lay["S_NPP"] == 7 and lay["FLOAT_FIELDS"] == D.FLOAT_FIELDS
     assert D.cache_key(sources, {**lay, "SCR_WALL": 137}) != D.KEY
     assert D.cache_key({**sources, "kernel_state": sources["kernel_state"] + "\n"}, lay) != D.KEY
-    with pytest.raises(RuntimeError, match="kernel module scenes.collision.kernel_gone has no source"):
+    with pytest.raises(RuntimeError, match=rf"kernel module {D.__package__}\.kernel_gone has no source"):
         D.kernel_sources(("kernel_gone",))
 
 
