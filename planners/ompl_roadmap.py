@@ -115,7 +115,7 @@ class Roadmap:
     seeded: int  # milestones fed from the seed paths
 
     def save(self, path: Path) -> None:
-        from planners.gcs_sets import save_npz_atomically
+        from planners.gcs.sets import save_npz_atomically
 
         save_npz_atomically(path, milestones=self.milestones, edges=self.edges,
                             meta=json.dumps({"format": FORMAT_VERSION, "key": self.key, "offline_s": self.offline_s,
@@ -151,7 +151,7 @@ class Roadmap:
 
 def roadmap_key(problem: PlanningProblem, cfg: PRMRoadmapConfig) -> str:
     """The hash of the problem's collision world and the roadmap's settings."""
-    from planners.gcs_sets import world_hash
+    from planners.gcs.sets import world_hash
 
     return world_hash(problem, cfg)
 
@@ -159,7 +159,7 @@ def roadmap_key(problem: PlanningProblem, cfg: PRMRoadmapConfig) -> str:
 def seed_path_states(problem: PlanningProblem) -> list[np.ndarray]:
     """The states, SEED_PATH_STEP_RAD apart, of RRT-Connect paths (unsimplified, the scene's fixed
     seed) between every pair of the scene's hand-placed seeds; none without seeds."""
-    from planners.gcs_cover import scene_seeds
+    from planners.gcs.cover import scene_seeds
     from planners.ompl_rrt import RRTConnectConfig, RRTConnectPlanner
     from planners.worlds import collision_world
 
@@ -232,7 +232,7 @@ def build_roadmap(problem: PlanningProblem, cfg: PRMRoadmapConfig, key: str) -> 
 
 def roadmap_for(problem: PlanningProblem, cfg: PRMRoadmapConfig) -> tuple[Roadmap, str]:
     """The world's roadmap from the cache, or built and stored; with "hit" or "built"."""
-    from planners.gcs_sets import find_cached
+    from planners.gcs.sets import find_cached
 
     key = roadmap_key(problem, cfg)
     path = find_cached(key, cfg.roadmap_dir, default=DEFAULT_CACHE_DIR, subdir="roadmaps")

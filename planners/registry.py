@@ -28,7 +28,7 @@ BUILTIN = {
     "prm-roadmap": "planners.ompl_roadmap:PRMRoadmapPlanner",
     "prm-roadmap-shortcut": "planners.ompl_roadmap:ShortcutPRMRoadmapPlanner",
     "trajopt": "planners.trajopt:TrajoptPlanner",
-    "gcs": "planners.gcs:GcsPlanner",
+    "gcs": "planners.gcs.planner:GcsPlanner",
     "roboplan-rrt": "planners.roboplan_rrt:RoboplanRRTPlanner",
 }
 #: Built-ins that need an optional extra: name -> (the module it needs, the extra that installs it).

@@ -9,7 +9,7 @@ planning time), and its path is judged by the suite's validator. Per world it re
 
 - offline seconds (`RegionSet.offline_s`) and the number of regions;
 - coverage: the fraction of collision-free samples inside some region, for two sample
-  distributions: "task" (the world's task chain, `planners.gcs_cover.task_chain`, perturbed by a
+  distributions: "task" (the world's task chain, `planners.gcs.cover.task_chain`, perturbed by a
   Gaussian of 0.25 rad per joint: `task_samples`; a fixed seed other than the build's) and
   "uniform" (uniform in the joint limits); 500 collision-free samples each (python-fcl);
 - per problem: whether start and goal are connected (after the online joins), the planning time
@@ -79,7 +79,7 @@ def pick_worlds(ds, *, families: set[str], kinds: dict[str, set[str]], per_famil
 
 def coverage_samples(problem, *, seed: int) -> dict[str, np.ndarray]:
     """The coverage distributions' collision-free samples (see the module docstring)."""
-    from planners.gcs_cover import free_task_samples, task_chain
+    from planners.gcs.cover import free_task_samples, task_chain
     from planners.worlds import collision_world
 
     world = collision_world(problem)
@@ -100,8 +100,8 @@ def coverage_samples(problem, *, seed: int) -> dict[str, np.ndarray]:
 def measure_world(payload: tuple) -> dict:
     """Worker: build one world's regions with each strategy and plan its problems with them."""
     items, strategies, iris, time_limit_s = payload
-    from planners.gcs import GcsConfig, GcsPlanner
-    from planners.gcs_regions import coverage_of, regions_for
+    from planners.gcs.planner import GcsConfig, GcsPlanner
+    from planners.gcs.regions import coverage_of, regions_for
     from planners.worlds import collision_world
     from suite.scoring.validate import validate_path
 

@@ -36,7 +36,7 @@ def _cpu_s() -> float:
 
 def pick_worlds(ds, options, *, worlds: int, pick: str) -> list:
     """(problem_id, problem, recorded offline_s or None) of the chosen worlds (one problem each)."""
-    from planners.gcs_regions import RegionSet, find_cached, world_hash
+    from planners.gcs.regions import RegionSet, find_cached, world_hash
 
     first: dict[str, tuple] = {}
     for pid, problem in zip(ds.ids, ds.problems):
@@ -54,7 +54,7 @@ def pick_worlds(ds, options, *, worlds: int, pick: str) -> list:
 
 
 def measure(text: str, *, worlds: int, pick: str) -> dict:
-    from planners.gcs_regions import (
+    from planners.gcs.regions import (
         RegionBuilder,
         RegionOptions,
         RegionSet,

@@ -3,7 +3,7 @@
 One job per distinct collision world of the dataset's problems, on the local process pool or a
 Dask cluster (the suite's executors, with their hard limits and crash handling); each grows the
 world's region set for all its problems and returns it, and this process stores it under the
-world's hash, where every later `gcs` trial finds it (see `planners.gcs_regions`). Worlds already
+world's hash, where every later `gcs` trial finds it (see `planners.gcs.regions`). Worlds already
 built and verified are not rebuilt (a Dask worker on another machine sees the cache only through
 a shared file system; otherwise it rebuilds).
 """
@@ -34,7 +34,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     b.add_argument("--seeding", default=None,
                    help="chain, cliques (from the world alone) or problem (at each problem's ends; default: gcs's default)")
     b.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", dest="region_set",
-                   help="a region option of gcs (planners.gcs_sets.RegionOptions: e.g. max_iterations=10, "
+                   help="a region option of gcs (planners.gcs.sets.RegionOptions: e.g. max_iterations=10, "
                         "termination_threshold=-1); repeatable")
     b.add_argument("--jobs", type=positive_int, default=2, help="worker processes (default 2)")
     b.add_argument("--executor", choices=("local", "dask"), default="local", help="where jobs run (default local)")
@@ -67,7 +67,7 @@ def parse_region_settings(items: list[str]) -> dict:
 
     import yaml
 
-    from planners.gcs_sets import RegionOptions
+    from planners.gcs.sets import RegionOptions
 
     names = sorted(f.name for f in dataclasses.fields(RegionOptions))
     out = {}
@@ -81,7 +81,7 @@ def parse_region_settings(items: list[str]) -> dict:
 
 def _connected(rs, problem) -> bool:
     """Whether gcs would find start and goal linked by the regions (after its online joins)."""
-    from planners.gcs_solve import connect_ends
+    from planners.gcs.solve import connect_ends
     from planners.worlds import collision_world
 
     return bool(connect_ends(rs.A, rs.b, rs.edges, problem.q_start, problem.q_goal,
@@ -91,7 +91,7 @@ def _connected(rs, problem) -> bool:
 def _build_world(payload: tuple) -> dict:
     """Worker: grow one world's regions for each of its problems (in this process)."""
     problems, options, out, rebuild = payload
-    from planners.gcs_regions import RegionSet, regions_for
+    from planners.gcs.regions import RegionSet, regions_for
 
     t0 = time.perf_counter()
     infos = []
@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _options(args):
-    from planners.gcs import GcsPlanner
+    from planners.gcs.planner import GcsPlanner
     from suite.run.trial import make_config
 
     chosen = {k: v for k, v in (("iris", getattr(args, "iris", None)), ("seeding", args.seeding)) if v is not None}
@@ -147,7 +147,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _build(args: argparse.Namespace) -> int:
-    from planners.gcs_regions import world_hash
+    from planners.gcs.regions import world_hash
     from suite.problems.dataset import dataset_dir, load_dataset, parse_dataset_arg
 
     if args.scheduler and args.executor != "dask":
@@ -216,7 +216,7 @@ def _build_all(executor, jobs, items, out: Path, rows: list[dict], args, options
 def _record_world(k: int, outcome, items, out: Path, rows: list[dict]) -> None:
     import numpy as np
 
-    from planners.gcs_regions import RegionSet
+    from planners.gcs.regions import RegionSet
 
     if outcome.result is None:
         print(f"[{k}/{len(items)}] {outcome.job.key}: {outcome.failure} ({outcome.message})", flush=True)
@@ -245,7 +245,7 @@ def summary_name(selection: str, seeding: str = "chain", options=None) -> str:
     import hashlib
     import re
 
-    from planners.gcs_sets import RegionOptions
+    from planners.gcs.sets import RegionOptions
 
     rest = selection.partition(":")[2] or "all"
     tail = "" if seeding == "chain" else f"-{seeding}"

@@ -273,7 +273,7 @@ def gcs_optimality(problem, rs, *, max_rounded_paths: int = 10, seed: int = 0) -
     same regions and ends (`suite.paper.paper_regions.linear_gcs`: costs on edges, where `gcs`'s
     GcsTrajectoryOptimization puts them on vertices): `linear_relaxed_rad`, `linear_rounded_rad`,
     `linear_gap`, and whether its rounded path passes the validator (`linear_path_valid`)."""
-    from planners.gcs_solve import connect_ends, solve_gcs
+    from planners.gcs.solve import connect_ends, solve_gcs
     from planners.worlds import collision_world
     from suite.scoring.validate import validate_path
 
@@ -307,7 +307,7 @@ def gcs_optimality(problem, rs, *, max_rounded_paths: int = 10, seed: int = 0) -
     out["optimum_rad"] = min(costs) + ends if costs else None
     out["relaxation_gap"] = (out["rounded_rad"] - out["relaxed_rad"]) / out["relaxed_rad"]
     out["rounding_optimal"] = bool(costs) and out["rounded_rad"] <= out["optimum_rad"] * (1 + 1e-3)
-    from planners.gcs_solve import sample_trajectory
+    from planners.gcs.solve import sample_trajectory
 
     def valid(points) -> bool:
         """Whether a path between the joined ends, with the joining segments added back, passes the validator."""
@@ -317,7 +317,7 @@ def gcs_optimality(problem, rs, *, max_rounded_paths: int = 10, seed: int = 0) -
 
     out["rounded_path_valid"] = valid(sample_trajectory(traj, order=1, step_rad=0.02))
     # The paper's own formulation (LinearGCS: costs on edges) on the same regions and ends.
-    from planners.gcs_regions import quiet_drake
+    from planners.gcs.regions import quiet_drake
     from suite.paper.paper_regions import linear_gcs
 
     t0 = time.perf_counter()

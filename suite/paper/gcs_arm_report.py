@@ -364,8 +364,8 @@ def offline_work(dataset: str, problem, *, rebuild: bool = False) -> tuple[dict[
     """Build (or load) the regions and the roadmap of `problem`'s world into the dataset's
     directory. Returns their figures (seconds are the builds' own, stored with the data) and the
     region set."""
-    from planners.gcs import GcsPlanner
-    from planners.gcs_regions import regions_for
+    from planners.gcs.planner import GcsPlanner
+    from planners.gcs.regions import regions_for
     from planners.ompl_roadmap import PRMRoadmapConfig, roadmap_for
     from suite.problems.dataset import dataset_dir
     from suite.run.trial import make_config
@@ -389,7 +389,7 @@ def offline_work(dataset: str, problem, *, rebuild: bool = False) -> tuple[dict[
 def our_region_rows(problem, rs) -> dict[str, dict]:
     """Per region of our set, named by its scene seed: faces, IRIS iterations and stop reason,
     inscribed radius, build time, and its collision fraction (`collision_fractions`)."""
-    from planners.gcs_cover import scene_seeds
+    from planners.gcs.cover import scene_seeds
     from suite.paper.paper_regions import collision_fractions
 
     named, _ = scene_seeds(problem)
@@ -407,7 +407,7 @@ def our_region_rows(problem, rs) -> dict[str, dict]:
 
 def paper_region_rows(problem) -> dict[str, dict]:
     """Per paper region: faces, collision fraction, inscribed radius."""
-    from planners.gcs_regions import inscribed_volume
+    from planners.gcs.regions import inscribed_volume
     from suite.paper.paper_regions import collision_fractions, load_paper_regions
 
     names, A, b = load_paper_regions()
@@ -434,7 +434,7 @@ def run_protocol(out: Path, *, dataset: str = "gcs-arm", runs: int = 10, time_li
 
     import yaml
 
-    from planners.gcs import GcsPlanner
+    from planners.gcs.planner import GcsPlanner
     from suite.cli import main as suite_main
     from suite.paper.gcs_arm import TASKS, gcs_optimality, task_label
     from suite.paper.paper_regions import paper_region_set

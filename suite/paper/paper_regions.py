@@ -13,9 +13,9 @@ committed (docs/gcs-paper-sources.md, section 7e).
   `source.json` (repository, commit, path, the file's git blob id, checked) and the repository's
   `LICENSE.TXT`. No pickle is read at run time (`load_paper_regions` loads with
   allow_pickle=False).
-- `paper_region_set` makes them a `planners.gcs_sets.RegionSet` of the gcs-arm world, named by the
+- `paper_region_set` makes them a `planners.gcs.sets.RegionSet` of the gcs-arm world, named by the
   same world hash as `gcs`'s own set at the paper's settings, with its edges computed as the
-  paper's code does (`IntersectsWith`, through `planners.gcs_regions.update_edges`) and marked built from the world, so that `gcs`, given its
+  paper's code does (`IntersectsWith`, through `planners.gcs.regions.update_edges`) and marked built from the world, so that `gcs`, given its
   directory as `regions_dir` and `build_regions: false`, plans on them.
 - `collision_fractions`: uniform samples of each region (hit-and-run) judged by the python-fcl world.
 - `linear_gcs`: the paper's `LinearGCS` formulation, written here from its equations on Drake's
@@ -141,8 +141,8 @@ def paper_region_set(problem, options) -> Any:
     (named by `world_hash(problem, options)`, marked built from the world, no build time)."""
     from pydrake.geometry.optimization import HPolyhedron
 
-    from planners.gcs_regions import update_edges
-    from planners.gcs_sets import WORLD_BUILT, RegionSet, world_hash
+    from planners.gcs.regions import update_edges
+    from planners.gcs.sets import WORLD_BUILT, RegionSet, world_hash
 
     names, A, b = load_paper_regions()
     # a point of each region: its Chebyshev centre (the file keeps no seeds)
@@ -171,7 +171,7 @@ def collision_fractions(problem, names: list[str], A: list, b: list, *, samples:
     from pydrake.common import RandomGenerator
     from pydrake.geometry.optimization import HPolyhedron
 
-    from planners.gcs_solve import uniform_samples
+    from planners.gcs.solve import uniform_samples
     from planners.worlds import collision_world
     from scenes.robot_model import load_robot
 

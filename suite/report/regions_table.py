@@ -19,8 +19,8 @@ import numpy as np
 
 def _world_rows(problems, metas, options) -> tuple[list[dict], list[str]]:
     """One row per built world (its figures) and the world hashes with no cached set."""
-    from planners.gcs_regions import RegionSet, find_cached, inscribed_volume, world_hash
-    from planners.gcs_solve import connect_ends
+    from planners.gcs.regions import RegionSet, find_cached, inscribed_volume, world_hash
+    from planners.gcs.solve import connect_ends
     from planners.worlds import collision_world
 
     worlds: dict[str, list] = {}

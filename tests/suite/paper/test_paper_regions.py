@@ -61,8 +61,8 @@ def test_the_conversion_refuses_another_file_and_any_other_class():
 def test_paper_gcs_maps_each_notebook_iris_option(notebook_name):
     """Each IrisOptions field the notebook sets is named in PAPER_GCS (dropping one fails here, even
     where `gcs`'s tuned setting happens to agree) and reaches IrisNp2 with the notebook's value."""
-    from planners.gcs import GcsPlanner
-    from planners.gcs_regions import iris_options
+    from planners.gcs.planner import GcsPlanner
+    from planners.gcs.regions import iris_options
     from suite.paper.gcs_arm_report import PAPER_GCS
     from suite.run.trial import make_config
 
@@ -83,7 +83,7 @@ def test_the_unmapped_notebook_option_is_documented():
 def test_gcs_plans_on_the_papers_regions(tmp_path):
     """The switch: a region set of the paper's regions in `regions_dir`, `build_regions` off, and
     `gcs` plans RB->AS on the paper's 9 regions; the path passes the validator, about the paper's 1.8 rad."""
-    from planners.gcs import GcsPlanner
+    from planners.gcs.planner import GcsPlanner
     from planners.worlds import collision_world
     from suite.paper.gcs_arm_report import PAPER_GCS, parse_region_sets
     from suite.paper.paper_regions import write_paper_region_set
@@ -108,7 +108,7 @@ def test_gcs_plans_on_the_papers_regions(tmp_path):
 
 def test_linear_gcs_on_the_papers_regions_reaches_the_papers_length():
     """The paper's formulation on its own regions: RB->AS relaxed and rounded at about 1.8 rad."""
-    from planners.gcs_sets import RegionOptions
+    from planners.gcs.sets import RegionOptions
     from suite.paper.paper_regions import linear_gcs, paper_region_set
 
     problem = _task("RB->AS")

@@ -102,7 +102,7 @@ def _noisy_problem(p, how: str, monkeypatch):
 
 @pytest.mark.parametrize("how", ["flip", "tiny"])
 def test_the_current_rule_hashes_a_zero_of_either_sign_and_noise_as_zero(cycle, how, monkeypatch):
-    from planners.gcs_sets import RegionOptions, problem_hash, world_hash
+    from planners.gcs.sets import RegionOptions, problem_hash, world_hash
 
     p = cycle["transit"]
     clean, noisy, noisy_obstacles = _noisy_problem(p, how, monkeypatch)

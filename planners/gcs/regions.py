@@ -5,7 +5,7 @@ plan-mode Drake scene of a problem's collision world (`scenes.drake_scene.add_sc
 `RobotDiagramBuilder` because the collision checker needs a `RobotDiagram`): the held can and the
 finger opening are part of the robot, removed cans are gone.
 
-Seeding. By default from the world alone (`seeding` "chain" or "cliques", `planners.gcs_cover`,
+Seeding. By default from the world alone (`seeding` "chain" or "cliques", `planners.gcs.cover`,
 `grow_for_world`): no problem's start, goal or path enters the regions, and joining a problem's
 ends to them is `gcs`'s online work. The earlier rule, `seeding: problem` (kept to reproduce its
 figures), seeds per problem of the world (offline, before any trial's clock):
@@ -20,7 +20,7 @@ Sampled-IRIS regions are only probabilistically collision-free, and Drake's geom
 validator's, so each region is also checked with the python-fcl world (the validator's engine):
 uniform samples, and the start-goal segment when a region holds both ends, are cut off where they
 collide. Then GCS is solved for the problem as the planner will solve it, its path checked with
-the python-fcl world and the colliding configurations cut off (`planners.gcs_solve.checked_path`),
+the python-fcl world and the colliding configurations cut off (`planners.gcs.solve.checked_path`),
 reconnecting along the guide path when a cut disconnects, for up to VERIFY_ROUNDS rounds. The
 planner still checks its path online; the suite's validator judges it like every other planner's.
 
@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from planners.gcs_sets import (  # noqa: F401 (the set's data, named here as before)
+from planners.gcs.sets import (  # noqa: F401 (the set's data, named here as before)
     DATASETS_DIR,
     DEFAULT_CACHE_DIR,
     FORMAT_VERSION,
@@ -56,7 +56,7 @@ from planners.gcs_sets import (  # noqa: F401 (the set's data, named here as bef
     problem_hash,
     world_hash,
 )
-from planners.gcs_solve import check_with_world, checked_path, cut_at_collision, cut_blocked_segment  # noqa: F401
+from planners.gcs.solve import check_with_world, checked_path, cut_at_collision, cut_blocked_segment  # noqa: F401
 from scenes.errors import SuiteError
 
 log = logging.getLogger(__name__)
@@ -412,11 +412,11 @@ def coverage_of(rs: RegionSet, samples: np.ndarray) -> float:
 
 
 def grow_for_world(rs: RegionSet, problem, builder: RegionBuilder) -> dict:
-    """Grow `rs` from the problem's collision world alone (its task chain, `planners.gcs_cover`),
+    """Grow `rs` from the problem's collision world alone (its task chain, `planners.gcs.cover`),
     never from the problem's start, goal or paths; then solve GCS between the chain's ends, check
     its path with the python-fcl world and cut what collides (`checked_path`). Returns the build's
     figures (chain, regions, seconds)."""
-    from planners.gcs_cover import chain_seeds, clique_seeds, free_task_samples, scene_seeds, task_chain
+    from planners.gcs.cover import chain_seeds, clique_seeds, free_task_samples, scene_seeds, task_chain
     from planners.worlds import planning_world
 
     o = builder.options

@@ -1,7 +1,7 @@
 """The data of `gcs`'s regions: their options (`RegionOptions`, every field in the cache key), a
 region set (`RegionSet`: H-polytopes, seeds, overlaps, what was verified, build time) and where
 sets are cached (one `.npz` per hash of the collision world and the options; datasets carry their
-own `regions/`). How regions are grown is `planners.gcs_regions`."""
+own `regions/`). How regions are grown is `planners.gcs.regions`."""
 
 from __future__ import annotations
 
@@ -19,16 +19,16 @@ from scenes.identity_rule import CURRENT_RULE, hashed
 
 FORMAT_VERSION = 1
 IRIS_ALGORITHMS = ("np2", "zo")
-#: How seeds are chosen: from the world alone ("chain", "cliques", see `planners.gcs_cover`), or
+#: How seeds are chosen: from the world alone ("chain", "cliques", see `planners.gcs.cover`), or
 #: from each problem's start, goal and a guide between them ("problem", the earlier rule: it uses
 #: the problems, so its regions are not the world's alone).
 SEEDINGS = ("chain", "cliques", "problem")
 #: The mark in `RegionSet.checked` of a set built from its world alone.
 WORLD_BUILT = "world"
 #: Default cache of regions built on demand (results/ is generated output, not committed).
-DEFAULT_CACHE_DIR = Path(__file__).resolve().parents[1] / "results" / "regions"
+DEFAULT_CACHE_DIR = Path(__file__).resolve().parents[2] / "results" / "regions"
 #: Datasets may carry their own prebuilt regions (`python -m suite regions build --dataset NAME`).
-DATASETS_DIR = Path(__file__).resolve().parents[1] / "scenes" / "datasets"
+DATASETS_DIR = Path(__file__).resolve().parents[2] / "scenes" / "datasets"
 
 
 SAMPLING_STRATEGIES = ("greedy", "ray")
@@ -74,7 +74,7 @@ class RegionOptions:
         threads: threads of one IRIS call (its collision checks).
         seeding: "chain" (default: regions along the world's task chain, each containing one
             segment of it), "cliques" (a visibility clique cover of samples of the task's
-            neighbourhood), both from the world alone (`planners.gcs_cover`); or "problem" (seeds
+            neighbourhood), both from the world alone (`planners.gcs.cover`); or "problem" (seeds
             at each problem's start, goal and along a guide between them, offline: the earlier
             rule, which uses the problems).
         segment_rad: longest chain segment one region must contain ("chain").
@@ -259,7 +259,7 @@ class RegionSet:
             it was recorded.
         checked: problem hashes for which the set was verified offline: the blocked start-goal
             segment cut out (`cut_blocked_segment`), start and goal connected, and GCS's path
-            checked with the python-fcl world and repaired by cuts (`planners.gcs_solve.checked_path`).
+            checked with the python-fcl world and repaired by cuts (`planners.gcs.solve.checked_path`).
     """
 
     world_hash: str

@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from planners import gcs_regions
+from planners.gcs import regions
 from planners.base import PlanStatus
-from planners.gcs import GcsConfig, GcsPlanner
-from planners.gcs_regions import RegionSet, world_hash
+from planners.gcs.planner import GcsConfig, GcsPlanner
+from planners.gcs.regions import RegionSet, world_hash
 from planners.registry import make_planner
 from planners.worlds import collision_world
 from scenes.errors import SuiteError
@@ -30,10 +30,10 @@ ROOMY_S = 60.0
 def built(open_transit, tmp_path_factory):
     """One trial of gcs on the open transit with an empty region cache (regions built in prepare)."""
     cache = tmp_path_factory.mktemp("regions")
-    grown_before = gcs_regions.GROWN_IN_PROCESS
+    grown_before = regions.GROWN_IN_PROCESS
     record = run_problem(open_transit.with_(time_limit_s=ROOMY_S), planner="gcs",
                          planner_config={**FAST, "regions_dir": str(cache)}, run_seed=0)
-    return record, cache, gcs_regions.GROWN_IN_PROCESS - grown_before
+    return record, cache, regions.GROWN_IN_PROCESS - grown_before
 
 
 def test_path_passes_the_validator_and_offline_time_is_recorded_apart(built, open_transit):
@@ -54,10 +54,10 @@ def test_path_passes_the_validator_and_offline_time_is_recorded_apart(built, ope
 def test_second_prepare_reuses_the_cache(built, open_transit):
     record, cache, _ = built
     planner = GcsPlanner(GcsConfig(**FAST, regions_dir=str(cache)))  # a fresh process-level planner
-    before = gcs_regions.GROWN_IN_PROCESS
+    before = regions.GROWN_IN_PROCESS
     planner.prepare(open_transit)
     r = planner.plan(open_transit.with_(time_limit_s=ROOMY_S))
-    assert gcs_regions.GROWN_IN_PROCESS == before
+    assert regions.GROWN_IN_PROCESS == before
     assert r.status is PlanStatus.SUCCESS and r.stats["regions_cache"] == "hit"
     assert r.stats["offline_s"] == pytest.approx(record["stats"]["offline_s"])
     assert r.stats["world_hash"] == record["stats"]["world_hash"]
@@ -92,8 +92,8 @@ def _invalid_region_cache(problem, directory, options):
     b = np.concatenate([hi, -lo])
     h = world_hash(problem, options)
     rs = RegionSet(h, [A], [b], [np.asarray(problem.q_start, float)], [0.0], offline_s=1.0,
-                   problems=[gcs_regions.problem_hash(problem)], edges=[], iris=options.iris,
-                   checked=[gcs_regions.problem_hash(problem), gcs_regions.WORLD_BUILT])
+                   problems=[regions.problem_hash(problem)], edges=[], iris=options.iris,
+                   checked=[regions.problem_hash(problem), regions.WORLD_BUILT])
     rs.save(directory / f"{h}.npz")
 
 
@@ -189,7 +189,7 @@ class _BallWorld:
 
 
 def test_a_region_whose_start_goal_segment_collides_is_cut_keeping_both_covered():
-    from planners.gcs_solve import cut_regions
+    from planners.gcs.solve import cut_regions
 
     box = lambda lo, hi: (np.vstack([np.eye(7), -np.eye(7)]), np.concatenate([np.full(7, hi), -np.full(7, lo)]))
     q0, q1 = np.r_[-1.0, np.zeros(6)], np.r_[1.0, np.zeros(6)]
@@ -209,7 +209,7 @@ def test_a_region_whose_start_goal_segment_collides_is_cut_keeping_both_covered(
 def test_a_region_cuts_left_empty_is_left_out_of_the_solve():
     """Drake's GcsTrajectoryOptimization throws on an empty region when it joins subgraphs
     ("Failed to compute the lower bound of a convex set"); solve_gcs leaves such a region out."""
-    from planners.gcs_solve import solve_gcs, usable_regions
+    from planners.gcs.solve import solve_gcs, usable_regions
 
     faces = np.vstack([np.eye(7), -np.eye(7)])
     box = lambda lo, hi: np.concatenate([np.full(7, hi), -np.full(7, lo)])
@@ -226,7 +226,7 @@ def _box(lo, hi):
 
 
 def test_an_end_outside_the_regions_is_joined_by_a_free_segment_to_the_nearest_region_it_reaches():
-    from planners.gcs_solve import connect_ends, join_endpoint
+    from planners.gcs.solve import connect_ends, join_endpoint
 
     # Region 0 spans x in [0, 1], region 1 x in [0.8, 3]; both span [-1, 1] in the other joints.
     (A0, b0), (A1, b1) = _box([0.0] + [-1] * 6, [1.0] + [1] * 6), _box([0.8] + [-1] * 6, [3.0] + [1] * 6)
@@ -255,7 +255,7 @@ def test_an_end_outside_the_regions_is_joined_by_a_free_segment_to_the_nearest_r
 
 
 def test_chain_seeds_contain_consecutive_pieces_of_the_chain_within_the_cap():
-    from planners.gcs_cover import chain_seeds
+    from planners.gcs.cover import chain_seeds
 
     chain = np.array([np.zeros(7), np.r_[2.0, np.zeros(6)], np.r_[2.0, 1.2, np.zeros(5)]])
     seeds = chain_seeds(chain, segment_rad=0.5, max_regions=12)
@@ -278,7 +278,7 @@ def test_chain_seeds_contain_consecutive_pieces_of_the_chain_within_the_cap():
 def test_the_task_chain_is_the_worlds_alone(wall_transit):
     """World seeding reads the scene's task waypoints, never the problem's start or goal: two
     problems of one world with other ends get the same chain (and the same cache key)."""
-    from planners.gcs_cover import task_chain
+    from planners.gcs.cover import task_chain
 
     chain, info = task_chain(wall_transit, seed=1234)
     other = wall_transit.with_(q_start=wall_transit.q_goal, q_goal=wall_transit.q_start)
@@ -302,7 +302,7 @@ def test_an_end_no_segment_joins_gets_an_online_region_in_planning_time(wall_tra
     A = np.vstack([np.eye(7), -np.eye(7)])
     b = np.concatenate([q1 + 0.02, -(q1 - 0.02)])
     RegionSet(h, [A], [b], [q1], [0.0], offline_s=1.0, edges=[], iris=options.iris,
-              checked=[gcs_regions.WORLD_BUILT]).save(tmp_path / f"{h}.npz")
+              checked=[regions.WORLD_BUILT]).save(tmp_path / f"{h}.npz")
     problem = wall_transit.with_(time_limit_s=ROOMY_S)  # the online region grows in planning time
     r = GcsPlanner(cfg).plan(problem)
     assert r.status is PlanStatus.NO_SOLUTION and r.stats["reason_code"] == "regions_disconnected"
@@ -316,7 +316,7 @@ def test_an_end_no_segment_joins_gets_an_online_region_in_planning_time(wall_tra
 
 
 def test_shortcut_keeps_a_free_polyline_and_drops_what_a_straight_motion_spans():
-    from planners.gcs_cover import shortcut
+    from planners.gcs.cover import shortcut
 
     # A dense path around a ball: its middle must stay off the ball, its ends are joined straight
     # wherever the ball allows.
@@ -335,7 +335,7 @@ def test_shortcut_keeps_a_free_polyline_and_drops_what_a_straight_motion_spans()
 
 
 def test_a_chain_with_more_segments_than_regions_is_cut_by_arc_length():
-    from planners.gcs_cover import chain_seeds
+    from planners.gcs.cover import chain_seeds
 
     t = np.linspace(0.0, np.pi, 30)  # 29 segments, 8 regions at most
     chain = np.zeros((30, 7))
@@ -351,7 +351,7 @@ def test_a_chain_with_more_segments_than_regions_is_cut_by_arc_length():
 
 
 def test_ends_in_parts_of_the_graph_that_do_not_meet_are_joined_across_by_a_segment():
-    from planners.gcs_solve import connect_ends
+    from planners.gcs.solve import connect_ends
 
     # Region 0: x in [0, 1]; region 1: x in [1.5, 3]; no edge. The start (x = 0.9) is in region 0,
     # the goal (x = 2.5) in region 1; a free straight segment from the start reaches region 1.
@@ -375,7 +375,7 @@ def test_world_regions_carry_a_window_return_through_the_opening(tmp_path):
     pid = next(i for i in ds.ids if ds.meta[i]["family"] == "window" and ds.meta[i]["kind"] == "return")
     problem = ds.problems[ds.ids.index(pid)].with_(time_limit_s=ROOMY_S)
     cfg = GcsConfig(regions_dir=str(tmp_path))
-    rs, info = gcs_regions.regions_for(problem, cfg.region_options(), cache_dir=tmp_path, fresh=True)
+    rs, info = regions.regions_for(problem, cfg.region_options(), cache_dir=tmp_path, fresh=True)
     assert info["build"]["ends_connected"] and 2 <= len(rs) <= 2 * cfg.max_regions_per_world
     planner = GcsPlanner(cfg)
     planner.prepare(problem)

@@ -3,8 +3,8 @@
 `solve_gcs` is one GcsTrajectoryOptimization shortest-path solve (convex relaxation, randomized
 rounding, restriction) with Clarabel or SCS; `checked_path` checks its path with the python-fcl
 world as the validator does and, where it collides, cuts that configuration off the regions
-holding it (`cut_regions`, `cut_at_collision`) and solves again. Used online by `planners.gcs` and
-offline by `planners.gcs_regions` when it verifies a world's regions.
+holding it (`cut_regions`, `cut_at_collision`) and solves again. Used online by `planners.gcs.planner` and
+offline by `planners.gcs.regions` when it verifies a world's regions.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from planners.base import Budget
-from planners.gcs_sets import RegionSet, linked, reachable
+from planners.gcs.sets import RegionSet, linked, reachable
 
 SOLVERS = ("clarabel", "scs")
 

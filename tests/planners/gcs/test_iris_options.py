@@ -7,8 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from planners.gcs_regions import _IrisLog, iris_options, regions_for
-from planners.gcs_sets import UNKEYED_DEFAULTS, RegionOptions, world_hash
+from planners.gcs.regions import _IrisLog, iris_options, regions_for
+from planners.gcs.sets import UNKEYED_DEFAULTS, RegionOptions, world_hash
 from scenes.errors import SuiteError
 
 #: What Drake's IRIS options hold that `RegionOptions` deliberately does not name (see its
@@ -85,7 +85,7 @@ def test_the_late_options_default_to_drakes_and_stay_out_of_the_key_until_change
 
 def test_a_shipped_region_set_still_loads_under_its_name():
     """The shipped sets were built before the late options were named: gcs's settings still find them."""
-    from planners.gcs import GcsPlanner
+    from planners.gcs.planner import GcsPlanner
     from suite.problems.dataset import load_dataset
     from suite.run.trial import make_config
 
@@ -118,7 +118,7 @@ def _record(message: str):
 def test_a_grown_region_records_its_iterations_stop_and_inscribed_volume(open_transit):
     """A real IrisZo region with the absolute threshold off runs to its iteration limit (or stops for a
     reason it names), and the region records it with the inscribed ellipsoid's volume."""
-    from planners.gcs_regions import RegionBuilder, RegionSet, _add_region
+    from planners.gcs.regions import RegionBuilder, RegionSet, _add_region
     from planners.worlds import planning_world
 
     options = RegionOptions(iris="zo", num_particles=100, max_iterations=2, termination_threshold=-1.0,
@@ -139,10 +139,10 @@ def test_regions_report_reads_the_cached_sets_per_family(tmp_path, capsys):
     which worlds of another setting are not built."""
     import json as _json
 
-    from planners import gcs_regions
+    from planners.gcs import regions
     from suite.cli import main
 
-    before = gcs_regions.GROWN_IN_PROCESS
+    before = regions.GROWN_IN_PROCESS
     out = tmp_path / "report.json"
     assert main(["regions", "report", "--dataset", "gcs-arm:tasks", "--json", str(out)]) == 0
     rep = _json.loads(out.read_text())
@@ -150,7 +150,7 @@ def test_regions_report_reads_the_cached_sets_per_family(tmp_path, capsys):
     assert fam["family"] == "gcs-arm" and every["family"] == "all" and fam["worlds"] == 1
     assert fam["iterations_max"] == 1 and fam["stops"] == {"iteration_limit": fam["regions_per_world"]}
     assert 0 <= fam["linked"] <= fam["problems"] == 5 and fam["radius_rad_median"] > 0
-    assert gcs_regions.GROWN_IN_PROCESS == before
+    assert regions.GROWN_IN_PROCESS == before
     capsys.readouterr()
     assert main(["regions", "report", "--dataset", "gcs-arm:tasks", "--set", "max_iterations=7"]) == 1
     assert "1 world(s) have no cached set at these options" in capsys.readouterr().out
@@ -162,8 +162,8 @@ def test_regions_report_reads_the_cached_sets_per_family(tmp_path, capsys):
 def test_every_world_of_a_shipped_tier_still_finds_its_set(tier):
     """Every collision world of the shipped quick tiers finds its region set under gcs's settings
     (the late options and the thresholds kept out of the key)."""
-    from planners.gcs import GcsPlanner
-    from planners.gcs_sets import find_cached
+    from planners.gcs.planner import GcsPlanner
+    from planners.gcs.sets import find_cached
     from suite.problems.dataset import load_dataset
     from suite.run.trial import make_config
 

@@ -2,14 +2,14 @@
 
 Marcucci et al., "Motion planning around obstacles with convex optimization" (Science Robotics
 2023). The configuration space is covered by collision-free convex regions (sampled IRIS, see
-`planners.gcs_regions`), built offline once per collision world from the world alone (its task
-chain, `planners.gcs_cover`; `seeding`) and cached on disk; `prepare` loads them (or builds them
+`planners.gcs.regions`), built offline once per collision world from the world alone (its task
+chain, `planners.gcs.cover`; `seeding`) and cached on disk; `prepare` loads them (or builds them
 on a miss) before the trial's clock starts, and their build time is reported as
 `stats.offline_s`, never as planning time.
 
 Online (planning time), start and goal are joined to the regions: an end no region holds is
 joined by a straight segment, free in the python-fcl world, to a point just inside the nearest
-region it can reach (`planners.gcs_solve.join_endpoint`); if none, the trial is NO_SOLUTION with
+region it can reach (`planners.gcs.solve.join_endpoint`); if none, the trial is NO_SOLUTION with
 `regions_disconnected`. Then one Bezier curve per visited region (order 1 by default: straight
 segments, so the cost is exactly the joint-space path length) between the joined ends, joined
 where regions intersect; the shortest path is found by the convex relaxation of the
@@ -37,8 +37,8 @@ from typing import ClassVar
 import numpy as np
 
 from planners.base import Budget, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
-from planners.gcs_regions import RegionBuilder, RegionOptions, RegionSet, check_with_world, problem_hash, regions_for
-from planners.gcs_solve import SOLVERS, checked_path, connect_ends
+from planners.gcs.regions import RegionBuilder, RegionOptions, RegionSet, check_with_world, problem_hash, regions_for
+from planners.gcs.solve import SOLVERS, checked_path, connect_ends
 from planners.worlds import remember
 from scenes.errors import SuiteError
 
@@ -51,7 +51,7 @@ ONLINE_OPTIONS = RegionOptions(iris="zo", num_particles=100, max_iterations=1, c
 
 @dataclasses.dataclass(frozen=True)
 class GcsConfig(RegionOptions):
-    """Settings of `gcs`: the region options (see `planners.gcs_regions.RegionOptions`) and:
+    """Settings of `gcs`: the region options (see `planners.gcs.regions.RegionOptions`) and:
 
     Attributes:
         order: Bezier order per region (1: straight segments, the shortest path).

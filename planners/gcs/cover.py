@@ -30,7 +30,7 @@ poses solved by the paper's IK recipe, its joint-space seeds as given. They are 
 the waypoints, not any problem's.
 
 All are built per world, offline; what a problem adds (joining its own start and goal to these
-regions) is done online by `planners.gcs`, inside its planning time.
+regions) is done online by `planners.gcs.planner`, inside its planning time.
 """
 
 from __future__ import annotations
