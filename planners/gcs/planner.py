@@ -37,8 +37,10 @@ from typing import ClassVar
 import numpy as np
 
 from planners.base import Budget, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
-from planners.gcs.regions import RegionBuilder, RegionOptions, RegionSet, check_with_world, problem_hash, regions_for
-from planners.gcs.solve import SOLVERS, checked_path, connect_ends
+from planners.gcs.iris import RegionBuilder
+from planners.gcs.regions import regions_for
+from planners.gcs.sets import RegionOptions, RegionSet, problem_hash
+from planners.gcs.solve import SOLVERS, check_with_world, checked_path, connect_ends
 from planners.worlds import remember
 from scenes.errors import SuiteError
 
@@ -51,7 +53,7 @@ ONLINE_OPTIONS = RegionOptions(iris="zo", num_particles=100, max_iterations=1, c
 
 @dataclasses.dataclass(frozen=True)
 class GcsConfig(RegionOptions):
-    """Settings of `gcs`: the region options (see `planners.gcs.regions.RegionOptions`) and:
+    """Settings of `gcs`: the region options (see `planners.gcs.sets.RegionOptions`) and:
 
     Attributes:
         order: Bezier order per region (1: straight segments, the shortest path).

@@ -36,7 +36,7 @@ def _cpu_s() -> float:
 
 def pick_worlds(ds, options, *, worlds: int, pick: str) -> list:
     """(problem_id, problem, recorded offline_s or None) of the chosen worlds (one problem each)."""
-    from planners.gcs.regions import RegionSet, find_cached, world_hash
+    from planners.gcs.sets import RegionSet, find_cached, world_hash
 
     first: dict[str, tuple] = {}
     for pid, problem in zip(ds.ids, ds.problems):
@@ -54,15 +54,9 @@ def pick_worlds(ds, options, *, worlds: int, pick: str) -> list:
 
 
 def measure(text: str, *, worlds: int, pick: str) -> dict:
-    from planners.gcs.regions import (
-        RegionBuilder,
-        RegionOptions,
-        RegionSet,
-        grow_for_problem,
-        grow_for_world,
-        quiet_drake,
-        world_hash,
-    )
+    from planners.gcs.iris import RegionBuilder, quiet_drake
+    from planners.gcs.regions import grow_for_problem, grow_for_world
+    from planners.gcs.sets import RegionOptions, RegionSet, world_hash
     from suite.problems.dataset import load_dataset
 
     ds = load_dataset(text)

@@ -91,7 +91,8 @@ def _connected(rs, problem) -> bool:
 def _build_world(payload: tuple) -> dict:
     """Worker: grow one world's regions for each of its problems (in this process)."""
     problems, options, out, rebuild = payload
-    from planners.gcs.regions import RegionSet, regions_for
+    from planners.gcs.regions import regions_for
+    from planners.gcs.sets import RegionSet
 
     t0 = time.perf_counter()
     infos = []
@@ -147,7 +148,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _build(args: argparse.Namespace) -> int:
-    from planners.gcs.regions import world_hash
+    from planners.gcs.sets import world_hash
     from suite.problems.dataset import dataset_dir, load_dataset, parse_dataset_arg
 
     if args.scheduler and args.executor != "dask":
@@ -216,7 +217,7 @@ def _build_all(executor, jobs, items, out: Path, rows: list[dict], args, options
 def _record_world(k: int, outcome, items, out: Path, rows: list[dict]) -> None:
     import numpy as np
 
-    from planners.gcs.regions import RegionSet
+    from planners.gcs.sets import RegionSet
 
     if outcome.result is None:
         print(f"[{k}/{len(items)}] {outcome.job.key}: {outcome.failure} ({outcome.message})", flush=True)

@@ -317,7 +317,7 @@ def gcs_optimality(problem, rs, *, max_rounded_paths: int = 10, seed: int = 0) -
 
     out["rounded_path_valid"] = valid(sample_trajectory(traj, order=1, step_rad=0.02))
     # The paper's own formulation (LinearGCS: costs on edges) on the same regions and ends.
-    from planners.gcs.regions import quiet_drake
+    from planners.gcs.iris import quiet_drake
     from suite.paper.paper_regions import linear_gcs
 
     t0 = time.perf_counter()

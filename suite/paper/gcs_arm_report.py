@@ -407,7 +407,7 @@ def our_region_rows(problem, rs) -> dict[str, dict]:
 
 def paper_region_rows(problem) -> dict[str, dict]:
     """Per paper region: faces, collision fraction, inscribed radius."""
-    from planners.gcs.regions import inscribed_volume
+    from planners.gcs.iris import inscribed_volume
     from suite.paper.paper_regions import collision_fractions, load_paper_regions
 
     names, A, b = load_paper_regions()

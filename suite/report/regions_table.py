@@ -19,7 +19,8 @@ import numpy as np
 
 def _world_rows(problems, metas, options) -> tuple[list[dict], list[str]]:
     """One row per built world (its figures) and the world hashes with no cached set."""
-    from planners.gcs.regions import RegionSet, find_cached, inscribed_volume, world_hash
+    from planners.gcs.iris import inscribed_volume
+    from planners.gcs.sets import RegionSet, find_cached, world_hash
     from planners.gcs.solve import connect_ends
     from planners.worlds import collision_world
 

@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from planners.gcs import regions
 from planners.base import PlanStatus
+from planners.gcs import iris, regions
 from planners.gcs.planner import GcsConfig, GcsPlanner
-from planners.gcs.regions import RegionSet, world_hash
+from planners.gcs.sets import WORLD_BUILT, RegionSet, problem_hash, world_hash
 from planners.registry import make_planner
 from planners.worlds import collision_world
 from scenes.errors import SuiteError
@@ -30,10 +30,10 @@ ROOMY_S = 60.0
 def built(open_transit, tmp_path_factory):
     """One trial of gcs on the open transit with an empty region cache (regions built in prepare)."""
     cache = tmp_path_factory.mktemp("regions")
-    grown_before = regions.GROWN_IN_PROCESS
+    grown_before = iris.GROWN_IN_PROCESS
     record = run_problem(open_transit.with_(time_limit_s=ROOMY_S), planner="gcs",
                          planner_config={**FAST, "regions_dir": str(cache)}, run_seed=0)
-    return record, cache, regions.GROWN_IN_PROCESS - grown_before
+    return record, cache, iris.GROWN_IN_PROCESS - grown_before
 
 
 def test_path_passes_the_validator_and_offline_time_is_recorded_apart(built, open_transit):
@@ -54,10 +54,10 @@ def test_path_passes_the_validator_and_offline_time_is_recorded_apart(built, ope
 def test_second_prepare_reuses_the_cache(built, open_transit):
     record, cache, _ = built
     planner = GcsPlanner(GcsConfig(**FAST, regions_dir=str(cache)))  # a fresh process-level planner
-    before = regions.GROWN_IN_PROCESS
+    before = iris.GROWN_IN_PROCESS
     planner.prepare(open_transit)
     r = planner.plan(open_transit.with_(time_limit_s=ROOMY_S))
-    assert regions.GROWN_IN_PROCESS == before
+    assert iris.GROWN_IN_PROCESS == before
     assert r.status is PlanStatus.SUCCESS and r.stats["regions_cache"] == "hit"
     assert r.stats["offline_s"] == pytest.approx(record["stats"]["offline_s"])
     assert r.stats["world_hash"] == record["stats"]["world_hash"]
@@ -92,8 +92,8 @@ def _invalid_region_cache(problem, directory, options):
     b = np.concatenate([hi, -lo])
     h = world_hash(problem, options)
     rs = RegionSet(h, [A], [b], [np.asarray(problem.q_start, float)], [0.0], offline_s=1.0,
-                   problems=[regions.problem_hash(problem)], edges=[], iris=options.iris,
-                   checked=[regions.problem_hash(problem), regions.WORLD_BUILT])
+                   problems=[problem_hash(problem)], edges=[], iris=options.iris,
+                   checked=[problem_hash(problem), WORLD_BUILT])
     rs.save(directory / f"{h}.npz")
 
 
@@ -302,7 +302,7 @@ def test_an_end_no_segment_joins_gets_an_online_region_in_planning_time(wall_tra
     A = np.vstack([np.eye(7), -np.eye(7)])
     b = np.concatenate([q1 + 0.02, -(q1 - 0.02)])
     RegionSet(h, [A], [b], [q1], [0.0], offline_s=1.0, edges=[], iris=options.iris,
-              checked=[regions.WORLD_BUILT]).save(tmp_path / f"{h}.npz")
+              checked=[WORLD_BUILT]).save(tmp_path / f"{h}.npz")
     problem = wall_transit.with_(time_limit_s=ROOMY_S)  # the online region grows in planning time
     r = GcsPlanner(cfg).plan(problem)
     assert r.status is PlanStatus.NO_SOLUTION and r.stats["reason_code"] == "regions_disconnected"

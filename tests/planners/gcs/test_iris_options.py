@@ -7,8 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from planners.gcs.regions import _IrisLog, iris_options, regions_for
-from planners.gcs.sets import UNKEYED_DEFAULTS, RegionOptions, world_hash
+from planners.gcs.iris import _IrisLog, iris_options
+from planners.gcs.regions import regions_for
+from planners.gcs.sets import UNKEYED_DEFAULTS, RegionOptions, RegionSet, world_hash
 from scenes.errors import SuiteError
 
 #: What Drake's IRIS options hold that `RegionOptions` deliberately does not name (see its
@@ -118,7 +119,8 @@ def _record(message: str):
 def test_a_grown_region_records_its_iterations_stop_and_inscribed_volume(open_transit):
     """A real IrisZo region with the absolute threshold off runs to its iteration limit (or stops for a
     reason it names), and the region records it with the inscribed ellipsoid's volume."""
-    from planners.gcs.regions import RegionBuilder, RegionSet, _add_region
+    from planners.gcs.iris import RegionBuilder
+    from planners.gcs.regions import _add_region
     from planners.worlds import planning_world
 
     options = RegionOptions(iris="zo", num_particles=100, max_iterations=2, termination_threshold=-1.0,
@@ -139,10 +141,10 @@ def test_regions_report_reads_the_cached_sets_per_family(tmp_path, capsys):
     which worlds of another setting are not built."""
     import json as _json
 
-    from planners.gcs import regions
+    from planners.gcs import iris
     from suite.cli import main
 
-    before = regions.GROWN_IN_PROCESS
+    before = iris.GROWN_IN_PROCESS
     out = tmp_path / "report.json"
     assert main(["regions", "report", "--dataset", "gcs-arm:tasks", "--json", str(out)]) == 0
     rep = _json.loads(out.read_text())
@@ -150,7 +152,7 @@ def test_regions_report_reads_the_cached_sets_per_family(tmp_path, capsys):
     assert fam["family"] == "gcs-arm" and every["family"] == "all" and fam["worlds"] == 1
     assert fam["iterations_max"] == 1 and fam["stops"] == {"iteration_limit": fam["regions_per_world"]}
     assert 0 <= fam["linked"] <= fam["problems"] == 5 and fam["radius_rad_median"] > 0
-    assert regions.GROWN_IN_PROCESS == before
+    assert iris.GROWN_IN_PROCESS == before
     capsys.readouterr()
     assert main(["regions", "report", "--dataset", "gcs-arm:tasks", "--set", "max_iterations=7"]) == 1
     assert "1 world(s) have no cached set at these options" in capsys.readouterr().out

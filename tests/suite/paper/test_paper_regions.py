@@ -62,7 +62,7 @@ def test_paper_gcs_maps_each_notebook_iris_option(notebook_name):
     """Each IrisOptions field the notebook sets is named in PAPER_GCS (dropping one fails here, even
     where `gcs`'s tuned setting happens to agree) and reaches IrisNp2 with the notebook's value."""
     from planners.gcs.planner import GcsPlanner
-    from planners.gcs.regions import iris_options
+    from planners.gcs.iris import iris_options
     from suite.paper.gcs_arm_report import PAPER_GCS
     from suite.run.trial import make_config
 
