@@ -94,7 +94,8 @@ def run(args: argparse.Namespace) -> int:
     from scenes.generate import generate_scene
     from scenes.spec import available_variants, load_spec
     from scenes.errors import SuiteError
-    from suite.execution.jobs import ExecutionJob, run_jobs
+    from suite.execution.job_spec import ExecutionJob
+    from suite.execution.jobs import run_jobs
     from suite.run.trial import config_dict, make_config
 
     planners = parse_planner_list(args.planners)

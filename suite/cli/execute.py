@@ -45,7 +45,8 @@ def print_outcomes(records) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from planners.registry import planner_class
-    from suite.execution.jobs import ExecutionJob, run_jobs, write_execution
+    from suite.execution.job_spec import ExecutionJob
+    from suite.execution.jobs import run_jobs, write_execution
     from suite.execution.config import CONTACT_MODELS, ExecutionConfig
     from suite.run.trial import config_dict, make_config
 

@@ -13,73 +13,21 @@ import json
 import logging
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
 from planners.base import PROBLEM_KINDS
 from scenes.scene import Scene
-from suite.execution.plan_loop import ON_FAILURE, closed_loop, open_loop, plan_open_loop
-from suite.execution.config import ExecutionConfig
+from suite.execution.job_spec import ExecutionJob
+from suite.execution.plan_loop import closed_loop, open_loop, plan_open_loop
 from suite.execution.simulate import execute_cycles
-
-if TYPE_CHECKING:
-    from perception.pipeline import PerceptionSetup
 
 log = logging.getLogger(__name__)
 
 EXECUTION_FILE = "execution.json"
 #: A run's moving-bin episodes (`suite.execution.moving_bin.MovingBinRecord.to_json` each).
 MOVING_BIN_FILE = "moving_bin.json"
-
-
-@dataclasses.dataclass(frozen=True)
-class ExecutionJob:
-    """One planner's execution of one scene (picklable plain values).
-
-    Attributes:
-        planner, planner_config: the planner and its settings.
-        scene: the scene at the start.
-        grasps: "truth" or "perceived".
-        time_limit_s: planning budget per problem (when this job plans).
-        seed: the run seed (trial seeds derive from it as in `compare`).
-        cans: pre-planned cycles in picking order, (can id, five paths or None where a problem
-            failed, first failed status); None to plan in this job.
-        q_home: where the pre-planned cycles start (the first approach's start); with `cans`.
-        reperceive: plan each next can from a fresh rendering of the simulated cameras.
-        replay_path: where to write the Meshcat replay HTML, or None.
-        config: the simulation settings.
-        perception: with `grasps="perceived"`, how they are perceived (pipeline, segmentation,
-            sensor model; `perception.pipeline.PerceptionSetup`); None: the paper's pipeline on
-            the spec's cameras.
-        world: the world the planners plan in, `truth` or `perceived` (None: the perceived one with
-            perceived grasps; `suite.run.runner.plan_world_for`). Judge and physics use the truth.
-        on_failure: what a can not fully planned does to the cans after it (`ON_FAILURE`): `skip`
-            (it stays on the plate; the cans after it are planned again around it, and the loop
-            goes on) or `stop` (the run ends there). Pre-planned `cans` always stop: their later
-            plans assumed the can gone.
-    """
-
-    planner: str
-    planner_config: dict[str, Any]
-    scene: Scene
-    grasps: str
-    time_limit_s: float
-    seed: int
-    cans: tuple[tuple[int, tuple[Any, ...], str], ...] | None = None
-    q_home: tuple[float, ...] | None = None
-    reperceive: bool = False
-    replay_path: str | None = None
-    config: ExecutionConfig = ExecutionConfig()
-    perception: PerceptionSetup | None = None
-    world: str | None = None
-    on_failure: str = "skip"
-
-    def __post_init__(self):
-        if self.on_failure not in ON_FAILURE:
-            from scenes.errors import SuiteError
-
-            raise SuiteError(f"unknown on-failure policy {self.on_failure!r}; allowed: {', '.join(ON_FAILURE)}")
 
 
 def run_execution(job: ExecutionJob) -> dict[str, Any]:

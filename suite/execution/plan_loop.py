@@ -5,7 +5,7 @@ left on the plate and the run goes on (`skip`), or the run ends there (`stop`)."
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -15,14 +15,10 @@ from suite.execution.commands import WorldState, planned_ahead, timed_cycle
 from suite.execution.monitor import where
 from suite.run.records import FINAL_RETURN_NOT_EXECUTED
 
-if TYPE_CHECKING:
-    from suite.execution.jobs import ExecutionJob
-
-#: What a can that cannot be fully planned does to the rest of the run (`ExecutionJob.on_failure`).
-ON_FAILURE = ("skip", "stop")
+from suite.execution.job_spec import ExecutionJob
 
 
-def plan_cans(problems: Sequence[PlanningProblem], job: "ExecutionJob",
+def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob,
               induced: list | None = None, planning_s: list | None = None) -> list[tuple[int, tuple, str]]:
     """Plan every problem (five per can, in order): per can its paths and first failed status.
     A path free in the planner's perceived world that the judge rejects in the truth is appended to
@@ -48,7 +44,7 @@ def plan_cans(problems: Sequence[PlanningProblem], job: "ExecutionJob",
     return out
 
 
-def plan_open_loop(scene: Scene, grasps, seen, job: "ExecutionJob", induced: list, planning_s: list
+def plan_open_loop(scene: Scene, grasps, seen, job: ExecutionJob, induced: list, planning_s: list
                    ) -> tuple[list[tuple[int, tuple, str]], np.ndarray]:
     """Every grasp's cycle planned before execution, in order (`plan_cans`), and where the first
     starts. A can not fully planned stays on the plate: with `skip`, the cans after it are posed and
@@ -123,7 +119,7 @@ def can_pose_from(can_id: int, X_WC: np.ndarray) -> CanPose:
     return CanPose(can_id, tuple(float(v) for v in X_WC[:3, 3]), lying, yaw)
 
 
-def closed_loop(job: "ExecutionJob", induced: list, worlds: list, planning_s: list):
+def closed_loop(job: ExecutionJob, induced: list, worlds: list, planning_s: list):
     """Between cycles: look again, rebuild the scene from where the cans now are, plan the next
     can, and hand its cycle to the simulation. In a perceived world, the world is rebuilt from
     every camera's fresh frame (the arm, at its pose when they were taken, left out); the truth of

@@ -11,8 +11,8 @@ import pytest
 
 from perception.pipeline import PerceptionSetup, noise_rng
 from perception.voxel_boxes import clear_of_cans, merge_boxes
-from perception.world import (LOOSE_PREFIXES, VOXEL_PREFIX, WorldParams, fill_row_holes, fixtures,
-                              inside, perceive_world)
+from perception.world import LOOSE_PREFIXES, VOXEL_PREFIX, WorldParams, fixtures, perceive_world
+from perception.world_evidence import fill_row_holes, inside
 from scenes.errors import SuiteError
 from scenes.generate import generate_scene
 from scenes.scene import CanPose, Scene
@@ -195,7 +195,7 @@ def test_a_perceived_world_without_perceived_grasps_is_refused(tmp_path):
 
 
 def test_depth_sigmas_follow_the_sensor_model():
-    from perception.world import depth_sigmas
+    from perception.world_evidence import depth_sigmas
     from scenes.sensor import SENSOR_PRESETS, SensorSpec
 
     z = np.array([0.5, 0.73, 1.2])

@@ -128,7 +128,8 @@ def test_closed_loop_frames_see_the_same_sensor_as_perceive(scene):
 @pytest.mark.slow
 def test_perceived_kinect_grasps_recycle_a_can_in_physics():
     from planners.registry import planner_class
-    from suite.execution.jobs import ExecutionJob, run_execution
+    from suite.execution.job_spec import ExecutionJob
+    from suite.execution.jobs import run_execution
     from suite.run.trial import config_dict, make_config
 
     scene = generate_scene(load_spec(variant="open").with_can_count(1), seed=2)

@@ -10,7 +10,7 @@ from planners.registry import planner_class
 from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp
 from scenes.spec import load_spec
-from suite.execution.jobs import ExecutionJob
+from suite.execution.job_spec import ExecutionJob
 from suite.execution.plan_loop import can_pose_from, open_loop, plan_cans
 from suite.execution.monitor import bin_region, where
 from suite.execution.simulate import execute_cycles
@@ -113,7 +113,8 @@ def _scene_with_a_moved_can():
 def test_reperceive_picks_a_moved_can_from_where_it_really_is():
     """The plan was made for where the can was; the can has since moved 10 cm. Open loop grasps at
     the old place and misses it; closed loop (perceive after each pick) recycles it."""
-    from suite.execution.jobs import ExecutionJob, run_execution
+    from suite.execution.job_spec import ExecutionJob
+    from suite.execution.jobs import run_execution
 
     believed, actual = _scene_with_a_moved_can()
     config = config_dict(make_config(planner_class("rrt"), None))

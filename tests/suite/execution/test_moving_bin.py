@@ -234,7 +234,7 @@ def test_a_planner_tied_to_its_world_is_not_applicable():
 @pytest.mark.slow
 def test_a_static_bin_through_the_loop_reproduces_todays_execution():
     from planners.registry import planner_class
-    from suite.execution.jobs import ExecutionJob
+    from suite.execution.job_spec import ExecutionJob
     from suite.execution.plan_loop import open_loop
     from suite.execution.moving_bin import run_moving_bin
     from suite.execution.simulate import execute_cycles
