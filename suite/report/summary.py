@@ -1,7 +1,7 @@
 """Writing a run's summary: summary.md, summary.csv and paired.csv.
 
 The numbers come from `summary_stats` (success rates, metric medians with IQR, paired comparisons),
-the tables from `summary_tables` and `summary_execution`; everything is computed from the saved
+the tables from `summary_tables`, `summary_search` and `summary_execution`; everything is computed from the saved
 trial records alone (see `suite.run.records`).
 """
 
@@ -16,11 +16,18 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from tabulate import tabulate
 
 from suite.report.outcomes import FEW_PROBLEMS
 from suite.report.summary_execution import EXECUTION_INTRO, execution_table
-from suite.report.summary_search import post_processing, search_summary
+from suite.report.summary_search import (
+    SEARCH_INTRO,
+    post_processing,
+    search_rows,
+    search_summary,
+)
 from suite.report.summary_stats import (
+    N_RESAMPLES,
     SUMMARY_METRICS,
     GroupSummary,
     MetricStats,
@@ -30,14 +37,28 @@ from suite.report.summary_stats import (
     summarize_run,
 )
 from suite.report.summary_tables import (
+    ATTRIBUTION_INTRO,
+    BEST_KNOWN_INTRO,
+    CERTIFICATION_INTRO,
+    COLD_INTRO,
+    REASON_CODE_INTRO,
+    attribution_rows,
     attribution_summary,
     best_known_agreement,
+    best_known_rows,
     cause_counts,
     certification_counts,
+    certification_rows,
+    cold_rows,
     cold_start,
-    summary_markdown,
+    common_rows,
+    composition,
+    failure_rows,
+    group_rows,
+    paired_rows,
+    reason_code_rows,
 )
-from suite.run.records import STATUSES, planners_in, problem_counts
+from suite.run.records import STATUSES, planners_in, problem_counts, statuses_in
 
 log = logging.getLogger(__name__)
 
@@ -155,6 +176,82 @@ def _write_csv(path: Path, headers: list[str], rows: list[list[Any]]) -> None:
         w.writerow(headers)
         for row in rows:
             w.writerow(["" if isinstance(v, float) and not math.isfinite(v) else v for v in row])
+
+
+def summary_markdown(
+    records: Sequence[dict[str, Any]],
+    *,
+    pairs: Sequence[PairedComparison],
+    planners: Sequence[str] | None = None,
+    title: str = "Run summary",
+    summary: RunSummary | None = None,
+) -> str:
+    """summary.md: per-planner, per-kind (and per-variant) tables, failures and paired comparisons.
+
+    `summary` is the run's `summarize_run` when the caller has it (default: computed here)."""
+    planners = list(planners) if planners is not None else planners_in(records)
+    summary = summary or summarize_run(records, planners=planners)
+    md = [
+        f"# {title}",
+        "",
+        f"{len(records)} trials: {len(planners)} planners ({', '.join(planners)}). {composition(records)}",
+        "",
+        "The unit is the distinct problem: a problem tried several times counts once (success as the share "
+        "of its trials solved, each metric as the median of its successful trials; times over warm trials only, "
+        "see Cold starts). Success: solved/distinct "
+        "problems, rate and its 95% Wilson interval. Time to solve: median [quartiles] over every problem, a "
+        "failure counted at its time budget. Other metrics: median [first quartile, third quartile] over each "
+        "planner's own solved problems; the common-subset table below measures all planners on the same problems.",
+        "",
+        "## Per planner",
+        "",
+    ]
+    md.append(tabulate(*reversed(group_rows(summary.overall, key=None)), tablefmt="github"))
+    if len(planners) > 1:
+        md += ["", "## On the problems every planner solved", "",
+               "Medians over the distinct problems that every planner solved (n of them per metric): "
+               "no planner is flattered by skipping the hard ones.", ""]
+        md.append(tabulate(*reversed(common_rows(summary.common, planners)), tablefmt="github"))
+    md += ["", "## Certified paths (successful trials)", "", CERTIFICATION_INTRO, ""]
+    md.append(tabulate(*reversed(certification_rows(records, planners)), tablefmt="github"))
+    if any(r.get("reference_length_rad") for r in records):
+        md += ["", "## Against the best known paths (successful trials)", "", BEST_KNOWN_INTRO, ""]
+        md.append(tabulate(*reversed(best_known_rows(records, planners)), tablefmt="github"))
+    if any(r.get("attribution") for r in records):
+        md += ["", "## Where planning time goes", "", ATTRIBUTION_INTRO, ""]
+        md.append(tabulate(*reversed(attribution_rows(records, planners)), tablefmt="github"))
+    search = search_rows(records, planners)
+    if search[1]:
+        md += ["", "## Search and simplification (OMPL planners)", "", SEARCH_INTRO, ""]
+        md.append(tabulate(*reversed(search), tablefmt="github"))
+    if any("warm" in r for r in records):
+        md += ["", "## Cold starts", "", COLD_INTRO, ""]
+        md.append(tabulate(*reversed(cold_rows(records, planners)), tablefmt="github"))
+    md += ["", "## Failures by status (trials)", ""]
+    md.append(tabulate(*reversed(failure_rows(summary.overall, statuses_in(records))), tablefmt="github"))
+    causes = reason_code_rows(records, planners)
+    if causes[1]:
+        md += ["", "## Failures by cause, per planner and family (trials)", "", REASON_CODE_INTRO, ""]
+        md.append(tabulate(*reversed(causes), tablefmt="github"))
+    md += ["", "## Per planner and problem kind", ""]
+    md.append(tabulate(*reversed(group_rows(summary.by_kind, key="problem")), tablefmt="github"))
+    if len({r["variant"] for r in records}) > 1:
+        md += ["", "## Per planner and scene family", ""]
+        md.append(
+            tabulate(*reversed(group_rows(summary.by_family, key="variant")), tablefmt="github")
+        )
+    md += [
+        "",
+        "## Paired comparisons",
+        "",
+        "Differences A - B on the distinct problems both planners solved (paired by problem identity): median, "
+        f"percentile-bootstrap 95% CI of the median resampling whole scenes ({N_RESAMPLES} resamples; problems of "
+        "one scene are not independent; n/a with one scene), two-sided Wilcoxon signed-rank p-value (it treats "
+        "problems as independent, so read it beside the CI). Negative means A is lower.",
+        "",
+    ]
+    md.append(tabulate(*reversed(paired_rows(pairs)), tablefmt="github") if pairs else "(fewer than two planners)")
+    return "\n".join(md) + "\n"
 
 
 def write_summary(

@@ -1,4 +1,5 @@
-"""Summary tables: the terminal table and summary.md (per planner, kind and variant, failures, pairs)."""
+"""Summary tables: the terminal table and the tables of summary.md (per planner, kind and variant,
+failures, pairs); `suite.report.summary` puts summary.md together."""
 
 from __future__ import annotations
 
@@ -13,16 +14,13 @@ from tabulate import tabulate
 
 from suite.report.outcomes import FEW_PROBLEMS, family_of
 from suite.report.summary_stats import (
-    N_RESAMPLES,
     SUMMARY_METRICS,
     GroupSummary,
     MetricStats,
     PairedComparison,
-    RunSummary,
     summarize,
-    summarize_run,
 )
-from suite.run.records import SUCCESS, planners_in, problem_counts, statuses_in
+from suite.run.records import SUCCESS, problem_counts
 
 #: The success-aware time column: every problem counts, a failure at its budget.
 TIME_TO_SOLVE_LABEL = "time to solve, failures at budget (s)"
@@ -365,81 +363,3 @@ def paired_rows(pairs: Sequence[PairedComparison]) -> tuple[list[str], list[list
         rows.append([SUMMARY_METRICS.get(c.metric, c.metric), f"{c.planner_a} - {c.planner_b}", c.n, c.scenes,
                      format_number(c.median_diff), ci, p, note])
     return headers, rows
-
-
-def summary_markdown(
-    records: Sequence[dict[str, Any]],
-    *,
-    pairs: Sequence[PairedComparison],
-    planners: Sequence[str] | None = None,
-    title: str = "Run summary",
-    summary: RunSummary | None = None,
-) -> str:
-    """summary.md: per-planner, per-kind (and per-variant) tables, failures and paired comparisons.
-
-    `summary` is the run's `summarize_run` when the caller has it (default: computed here)."""
-    planners = list(planners) if planners is not None else planners_in(records)
-    summary = summary or summarize_run(records, planners=planners)
-    md = [
-        f"# {title}",
-        "",
-        f"{len(records)} trials: {len(planners)} planners ({', '.join(planners)}). {composition(records)}",
-        "",
-        "The unit is the distinct problem: a problem tried several times counts once (success as the share "
-        "of its trials solved, each metric as the median of its successful trials; times over warm trials only, "
-        "see Cold starts). Success: solved/distinct "
-        "problems, rate and its 95% Wilson interval. Time to solve: median [quartiles] over every problem, a "
-        "failure counted at its time budget. Other metrics: median [first quartile, third quartile] over each "
-        "planner's own solved problems; the common-subset table below measures all planners on the same problems.",
-        "",
-        "## Per planner",
-        "",
-    ]
-    md.append(tabulate(*reversed(group_rows(summary.overall, key=None)), tablefmt="github"))
-    if len(planners) > 1:
-        md += ["", "## On the problems every planner solved", "",
-               "Medians over the distinct problems that every planner solved (n of them per metric): "
-               "no planner is flattered by skipping the hard ones.", ""]
-        md.append(tabulate(*reversed(common_rows(summary.common, planners)), tablefmt="github"))
-    md += ["", "## Certified paths (successful trials)", "", CERTIFICATION_INTRO, ""]
-    md.append(tabulate(*reversed(certification_rows(records, planners)), tablefmt="github"))
-    if any(r.get("reference_length_rad") for r in records):
-        md += ["", "## Against the best known paths (successful trials)", "", BEST_KNOWN_INTRO, ""]
-        md.append(tabulate(*reversed(best_known_rows(records, planners)), tablefmt="github"))
-    if any(r.get("attribution") for r in records):
-        md += ["", "## Where planning time goes", "", ATTRIBUTION_INTRO, ""]
-        md.append(tabulate(*reversed(attribution_rows(records, planners)), tablefmt="github"))
-    from suite.report.summary_search import SEARCH_INTRO, search_rows
-
-    search = search_rows(records, planners)
-    if search[1]:
-        md += ["", "## Search and simplification (OMPL planners)", "", SEARCH_INTRO, ""]
-        md.append(tabulate(*reversed(search), tablefmt="github"))
-    if any("warm" in r for r in records):
-        md += ["", "## Cold starts", "", COLD_INTRO, ""]
-        md.append(tabulate(*reversed(cold_rows(records, planners)), tablefmt="github"))
-    md += ["", "## Failures by status (trials)", ""]
-    md.append(tabulate(*reversed(failure_rows(summary.overall, statuses_in(records))), tablefmt="github"))
-    causes = reason_code_rows(records, planners)
-    if causes[1]:
-        md += ["", "## Failures by cause, per planner and family (trials)", "", REASON_CODE_INTRO, ""]
-        md.append(tabulate(*reversed(causes), tablefmt="github"))
-    md += ["", "## Per planner and problem kind", ""]
-    md.append(tabulate(*reversed(group_rows(summary.by_kind, key="problem")), tablefmt="github"))
-    if len({r["variant"] for r in records}) > 1:
-        md += ["", "## Per planner and scene family", ""]
-        md.append(
-            tabulate(*reversed(group_rows(summary.by_family, key="variant")), tablefmt="github")
-        )
-    md += [
-        "",
-        "## Paired comparisons",
-        "",
-        "Differences A - B on the distinct problems both planners solved (paired by problem identity): median, "
-        f"percentile-bootstrap 95% CI of the median resampling whole scenes ({N_RESAMPLES} resamples; problems of "
-        "one scene are not independent; n/a with one scene), two-sided Wilcoxon signed-rank p-value (it treats "
-        "problems as independent, so read it beside the CI). Negative means A is lower.",
-        "",
-    ]
-    md.append(tabulate(*reversed(paired_rows(pairs)), tablefmt="github") if pairs else "(fewer than two planners)")
-    return "\n".join(md) + "\n"

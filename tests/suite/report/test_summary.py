@@ -301,7 +301,7 @@ def test_search_and_simplification_are_reported_apart_for_ompl_planners():
     assert post_processing({"simplifier": "rope", "simplify_time_s": 0.0}) == "none"
     assert post_processing({"shortcut": True, "shortcut_max_iters": 100}) == "roboplan PathShortcutter (100 random shortcuts)"
     assert post_processing({"num_control_points": 10}) == "none"
-    from suite.report.summary_tables import summary_markdown
+    from suite.report.summary import summary_markdown
 
     md = summary_markdown(recs, pairs=[], planners=["rrt", "trajopt"])
     assert "## Search and simplification (OMPL planners)" in md
