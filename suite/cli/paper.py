@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
         path = write_paper_regions(reg.read_bytes(), lic.read_text())
         print(f"wrote {path} (and source.json, LICENSE.TXT beside it)")
         return 0
-    from suite.paper.gcs_arm_report import parse_region_sets, run_protocol
+    from suite.paper.gcs_arm_protocol import parse_region_sets, run_protocol
 
     out = Path(args.out)
     report = run_protocol(out, runs=args.runs, time_limit_s=args.time_limit_s, jobs=args.jobs,

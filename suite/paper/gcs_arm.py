@@ -18,13 +18,11 @@ below comes from the paper's repository, RobotLocomotion/gcs-science-robotics at
 
 from __future__ import annotations
 
-import dataclasses
 import datetime as dt
 import json
 import math
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np

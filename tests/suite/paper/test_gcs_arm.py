@@ -87,3 +87,39 @@ def test_finding_3_does_not_hold_where_an_optimum_collides():
     third = findings(table, optimality, {})[2]
     held = {x["regions"]: x["held"] for x in third["by_regions"]}
     assert held == {"ours": False, "paper": True}
+
+
+def test_a_protocol_run_writes_what_compare_writes_and_resumes(tmp_path):
+    """`paper gcs-arm` runs its comparisons through the runner, not the command line: a run holds
+    the files, settings and trials that `compare` writes for the same settings; run again, it is
+    resumed (nothing planned twice); with other settings it is refused."""
+    import json
+
+    import yaml
+
+    from scenes.errors import SuiteError
+    from suite.cli import main
+    from suite.paper.gcs_arm_protocol import PAPER_GCS, comparison_run
+    from suite.run.records import read_trials
+
+    settings = tmp_path / "config.yaml"
+    settings.write_text(yaml.safe_dump({"planner_configs": {"gcs": dict(PAPER_GCS)}}))
+    api, cli = tmp_path / "api", tmp_path / "cli"
+    run = dict(settings=settings, planners=["rrt"], dataset="gcs-arm:tasks", jobs=1, time_limit_s=1.0, progress=False)
+    comparison_run(api, seed=0, **run)
+    assert main(["compare", "--dataset", "gcs-arm:tasks", "--planners", "rrt", "--seed", "0", "--jobs", "1",
+                 "--time-limit-s", "1", "--config", str(settings), "--out", str(cli), "--no-progress"]) == 0
+
+    def files(d):
+        return sorted(str(p.relative_to(d)) for p in d.rglob("*") if p.is_file())
+
+    assert files(api) == files(cli) and "report.html" in files(api) and "summary.md" in files(api)
+    manifests = [json.loads((d / "manifest.json").read_text()) for d in (api, cli)]
+    assert manifests[0].keys() == manifests[1].keys() and manifests[0]["config"] == manifests[1]["config"]
+    assert manifests[0]["status"] == "complete" and manifests[0]["trials_recorded"] == 5
+    assert sorted(r["trial_id"] for r in read_trials(api)) == sorted(r["trial_id"] for r in read_trials(cli))
+    lines = (api / "trials.jsonl").read_text()
+    comparison_run(api, seed=0, **run)  # resumed: every trial is recorded already
+    assert (api / "trials.jsonl").read_text() == lines
+    with pytest.raises(SuiteError, match="seed"):
+        comparison_run(api, seed=1, **run)

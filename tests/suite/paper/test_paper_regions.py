@@ -63,7 +63,7 @@ def test_paper_gcs_maps_each_notebook_iris_option(notebook_name):
     where `gcs`'s tuned setting happens to agree) and reaches IrisNp2 with the notebook's value."""
     from planners.gcs.planner import GcsPlanner
     from planners.gcs.iris import iris_options
-    from suite.paper.gcs_arm_report import PAPER_GCS
+    from suite.paper.gcs_arm_protocol import PAPER_GCS
     from suite.run.trial import make_config
 
     field, value = NOTEBOOK_IRIS[notebook_name]
@@ -85,7 +85,7 @@ def test_gcs_plans_on_the_papers_regions(tmp_path):
     `gcs` plans RB->AS on the paper's 9 regions; the path passes the validator, about the paper's 1.8 rad."""
     from planners.gcs.planner import GcsPlanner
     from planners.worlds import collision_world
-    from suite.paper.gcs_arm_report import PAPER_GCS, parse_region_sets
+    from suite.paper.gcs_arm_protocol import PAPER_GCS, parse_region_sets
     from suite.paper.paper_regions import write_paper_region_set
     from suite.run.trial import make_config
     from suite.scoring.polyline import path_length_rad
