@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from suite.report.plots_common import planner_colors, plt, save_figure
-from suite.report.summary_moving_bin import paired_differences, speed_cells
+from suite.report.summary_moving_bin import speed_cells
+from suite.report.summary_moving_bin_paired import paired_differences
 
 #: Colours and markers of the pairs of planners (not the planners' own colours: a pair is neither).
 PAIR_STYLES = (("#393b79", "o"), ("#843c39", "s"), ("#637939", "D"), ("#7b4173", "^"), ("#7f7f7f", "v"),

@@ -1,5 +1,6 @@
 """The moving-bin tables: per planner and bin speed, cans in the bin and why the others were lost;
-planners compared episode by episode on the same bin paths; where a replan's time goes.
+planners compared episode by episode on the same bin paths (`summary_moving_bin_paired`); where a
+replan's time goes.
 
 Every figure comes from moving_bin.json alone (plain dicts, `suite.execution.moving_bin.MovingBinRecord`).
 Records written before the loop joined replans on the move lack its newer fields (bin_seed,
@@ -10,7 +11,6 @@ every one of them is read with a default, and a column whose field no record car
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -19,6 +19,13 @@ import numpy as np
 from tabulate import tabulate
 
 from suite.report.outcomes import wilson_interval
+from suite.report.summary_moving_bin_paired import (
+    PAIRED_CAPTION,
+    latency_mode,
+    paired_rows,
+    planner_order,
+    release_mode,
+)
 from suite.report.summary_tables import format_number
 
 MOVING_BIN_INTRO = """## Moving bin
@@ -50,41 +57,11 @@ person) beside them. Jump: the largest jump of the command at a splice (position
 rad/s). Grasp-release: median time from the closed grasp to the release.
 """
 
-#: The fewest paired episodes, and scenes, over which a difference may be called established.
-MIN_PAIRED = 10
-MIN_SCENES = 4
-
-PAIRED_CAPTION = (
-    "Paired differences between planners. The unit is an episode: one scene, one seeded bin path, one "
-    "speed (and latency and release mode), which every planner meets. For each episode both planners ran "
-    "(ok or crashed; a crash delivers none), d = A's cans in the bin per can offered minus B's; the "
-    "table gives the episodes paired, the mean of d in percentage points and its 95% interval from a "
-    "percentile bootstrap (10,000 resamples, seed 0) over scenes, each with all its episodes: the bin paths of "
-    "one scene share its cans and static plans, so the scene is the independent unit; established: the "
-    "interval excludes 0; "
-    "A ahead / B ahead: the episodes where each put more in the bin. \"all\" pools every speed above 0. The "
-    "pairing is on scenes and bin-path seeds, not on states (each planner reaches the bin at its own moments). Over few "
-    "episodes a percentile bootstrap interval is too narrow (over 2 it takes at most 3 values), so a difference "
-    f"is called established only over at least {MIN_PAIRED} paired episodes from {MIN_SCENES} scenes. No "
-    "correction for the number of comparisons (pairs x speeds) is made: read a single 'yes' among many rows "
-    "with that in mind.")
-
 #: The failure stages in the order of a replan, and their short names in a table cell.
 STAGES = ("start", "goal_ik", "join", "planner", "validator", "person", "timing", "budget")
 STAGE_SHORT = {"goal_ik": "ik"}
 #: A replan's steps in order (old records have "blend", new ones "join" and "person").
 STEPS = ("world", "blend", "ik", "plan", "join", "validate", "person", "timing")
-#: Bootstrap of the paired differences.
-N_RESAMPLES = 10_000
-BOOTSTRAP_SEED = 0
-
-
-def _latency_mode(r: dict[str, Any]) -> str:
-    return r.get("latency_mode") or "measured"
-
-
-def _release_mode(r: dict[str, Any]) -> str:
-    return r.get("release_mode") or "rest"
 
 
 def _deadline_bound(e: dict[str, Any]) -> bool:
@@ -97,12 +74,6 @@ def _total(rs: Sequence[dict[str, Any]], key: str) -> int | None:
     """The sum of an integer field over the records carrying it; None if none does (an older record)."""
     values = [r[key] for r in rs if r.get(key) is not None]
     return int(sum(values)) if values else None
-
-
-def _planner_order(records: Sequence[dict[str, Any]], planners: Sequence[str] | None) -> list[str]:
-    present = list(dict.fromkeys(r["planner"] for r in records))
-    order = [p for p in (planners or ()) if p in present]
-    return order + [p for p in present if p not in order]  # the records' own planners too
 
 
 @dataclasses.dataclass(frozen=True)
@@ -190,11 +161,11 @@ def speed_cells(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | 
     """Per planner (in the given order, then any other in the records), speed (ascending), latency
     mode and release mode, the episodes' totals (over the episodes with status ok)."""
     out = []
-    for p in _planner_order(records, planners):
+    for p in planner_order(records, planners):
         mine = [r for r in records if r["planner"] == p and r.get("speed_m_s") is not None]
-        groups = sorted({(float(r["speed_m_s"]), _latency_mode(r), _release_mode(r)) for r in mine})
+        groups = sorted({(float(r["speed_m_s"]), latency_mode(r), release_mode(r)) for r in mine})
         for v, lat, rel in groups:
-            rs = [r for r in mine if (float(r["speed_m_s"]), _latency_mode(r), _release_mode(r)) == (v, lat, rel)]
+            rs = [r for r in mine if (float(r["speed_m_s"]), latency_mode(r), release_mode(r)) == (v, lat, rel)]
             ok = [r for r in rs if r.get("status") == "ok"]
             na = next((r["reason"] for r in rs if r.get("status") == "not_applicable"), "")
             k, attempted = sum(r["cans_in_bin"] for r in ok), sum(r["cans_attempted"] for r in ok)
@@ -342,142 +313,6 @@ def moving_bin_rows(records: Sequence[dict[str, Any]], *, planners: Sequence[str
     return headers, rows
 
 
-# --- paired differences -------------------------------------------------------------------------
-
-def episode_key(r: dict[str, Any]) -> tuple:
-    """What every planner meets in the same way: the scene, the bin path, the speed and the modes."""
-    return (r.get("variant"), r.get("scene_seed"), r.get("bin_seed"), int(r.get("path_index") or 0),
-            float(r["speed_m_s"]), _latency_mode(r), _release_mode(r))
-
-
-@dataclasses.dataclass(frozen=True)
-class PairedDifference:
-    """Planner A minus planner B in cans in the bin per can offered, over the episodes both ran.
-
-    speed_m_s, latency_mode, release_mode are None on the row pooling every speed above 0. mean_pp and ci_pp
-    (percentage points) are None with fewer than 2 episodes."""
-
-    planner_a: str
-    planner_b: str
-    speed_m_s: float | None
-    latency_mode: str | None
-    release_mode: str | None
-    n: int
-    mean_pp: float | None
-    ci_pp: tuple[float, float] | None
-    a_ahead: int = 0
-    b_ahead: int = 0
-    scenes: int = 0
-
-    @property
-    def established(self) -> bool | None:
-        """The interval excludes 0, over at least MIN_PAIRED episodes from at least MIN_SCENES
-        scenes (None: too few to say)."""
-        if self.ci_pp is None or self.n < MIN_PAIRED or self.scenes < MIN_SCENES:
-            return None
-        return self.ci_pp[0] > 0 or self.ci_pp[1] < 0
-
-
-def bootstrap_mean_ci(d: np.ndarray, *, clusters: Sequence | None = None, n_resamples: int = N_RESAMPLES,
-                      seed: int = BOOTSTRAP_SEED, level: float = 0.95) -> tuple[float, float]:
-    """Percentile-bootstrap interval of the mean of d (default_rng(seed)): resampling its entries,
-    or, with `clusters` (a label per entry), whole clusters: the episodes of one scene share its
-    cans and its static plans, so they are not independent (a cluster bootstrap)."""
-    d = np.asarray(d, float)
-    rng = np.random.default_rng(seed)
-    if clusters is not None:
-        labels = sorted(set(clusters), key=repr)
-        sums = np.array([sum(x for x, c in zip(d, clusters) if c == g) for g in labels])
-        counts = np.array([sum(1 for c in clusters if c == g) for g in labels], float)
-        pick = rng.integers(0, len(labels), size=(n_resamples, len(labels)))
-        means = sums[pick].sum(axis=1) / counts[pick].sum(axis=1)
-    else:
-        means = np.empty(n_resamples)
-        chunk = max(1, min(n_resamples, 2_000_000 // max(len(d), 1)))
-        for start in range(0, n_resamples, chunk):
-            stop = min(n_resamples, start + chunk)
-            means[start:stop] = d[rng.integers(0, len(d), size=(stop - start, len(d)))].mean(axis=1)
-    alpha = (1 - level) / 2
-    lo, hi = np.quantile(means, [alpha, 1 - alpha])
-    return float(lo), float(hi)
-
-
-def _episode_rates(records: Sequence[dict[str, Any]], planner: str) -> dict[tuple, float]:
-    """Cans in the bin per can offered per episode key (episodes that ran or ended in an error,
-    which delivers none of the cans it did not finish; a key met twice takes the mean)."""
-    by_key: dict[tuple, list[float]] = {}
-    for r in records:
-        if r["planner"] == planner and r.get("status") in ("ok", "error") and r.get("cans_total") \
-                and r.get("speed_m_s") is not None:
-            delivered = r.get("cans_in_bin", 0) if r.get("status") == "ok" else 0
-            by_key.setdefault(episode_key(r), []).append(delivered / r["cans_total"])
-    return {k: float(np.mean(v)) for k, v in by_key.items()}
-
-
-def _difference(a: str, b: str, keys: Sequence[tuple], ra: dict, rb: dict, group: tuple) -> PairedDifference:
-    d = np.array([ra[k] - rb[k] for k in keys])
-    scenes = [(k[0], k[1]) for k in keys]  # the cluster: the scene (variant, seed)
-    ahead = (int((d > 0).sum()), int((d < 0).sum()))
-    if len(d) < 2:
-        return PairedDifference(a, b, *group, len(d), None, None, *ahead, scenes=len(set(scenes)))
-    lo, hi = bootstrap_mean_ci(d, clusters=scenes if len(set(scenes)) > 1 else None)
-    return PairedDifference(a, b, *group, len(d), 100 * float(d.mean()), (100 * lo, 100 * hi), *ahead,
-                            scenes=len(set(scenes)))
-
-
-def paired_differences(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
-                       ) -> list[PairedDifference]:
-    """Every pair of planners (A before B in the given order) at every speed (and modes) where they
-    share episodes, then pooled over them all (when there is more than one)."""
-    order = _planner_order(records, planners)
-    rates = {p: _episode_rates(records, p) for p in order}
-    out = []
-    for a, b in itertools.combinations([p for p in order if rates[p]], 2):
-        shared = sorted(set(rates[a]) & set(rates[b]), key=repr)
-        if not shared:
-            continue
-        groups = sorted({(k[4], k[5], k[6]) for k in shared})
-        for g in groups:
-            out.append(_difference(a, b, [k for k in shared if (k[4], k[5], k[6]) == g], rates[a], rates[b], g))
-        moving = [k for k in shared if k[4] > 0]  # a still bin asks for no replanning: not pooled
-        if len({(k[4], k[5], k[6]) for k in moving}) > 1:
-            out.append(_difference(a, b, moving, rates[a], rates[b], (None, None, None)))
-    return out
-
-
-def _pp(v: float) -> str:
-    return f"{v:+.1f}" if abs(v) >= 0.05 else "0.0"
-
-
-def paired_rows(records: Sequence[dict[str, Any]], planners: Sequence[str] | None = None
-                ) -> tuple[list[str], list[list[Any]]]:
-    """The paired table: per pair of planners and speed, episodes paired, mean difference (pp), its
-    95% bootstrap interval, established. No rows when no two planners share an episode."""
-    diffs = paired_differences(records, planners=planners)
-    per_group = [d for d in diffs if d.speed_m_s is not None]
-    modes_lat = len({d.latency_mode for d in per_group}) > 1
-    modes_rel = len({d.release_mode for d in per_group}) > 1
-    headers = ["A - B", "speed (m/s)", *(["latency"] if modes_lat else []), *(["release"] if modes_rel else []),
-               "episodes paired", "A ahead / B ahead", "mean difference (pp)", "95% interval (pp)", "established"]
-    rows = []
-    for d in diffs:
-        pooled = d.speed_m_s is None
-        row = [f"{d.planner_a} - {d.planner_b}", "all" if pooled else format_number(d.speed_m_s)]
-        if modes_lat:
-            row.append("all" if pooled else d.latency_mode)
-        if modes_rel:
-            row.append("all" if pooled else d.release_mode)
-        row += [f"{d.n} ({d.scenes} scenes)", f"{d.a_ahead} / {d.b_ahead}"]
-        if d.ci_pp is None:
-            row += ["-", "-", "-"]
-        else:
-            said = {True: "yes", False: "no", None: f"too few (< {MIN_PAIRED} episodes or {MIN_SCENES} scenes)"}[
-                d.established]
-            row += [_pp(d.mean_pp), f"[{_pp(d.ci_pp[0])}, {_pp(d.ci_pp[1])}]", said]
-        rows.append(row)
-    return headers, rows
-
-
 # --- latency per step ---------------------------------------------------------------------------
 
 def latency_caption(source: set[str]) -> str:
@@ -500,9 +335,9 @@ def latency_table(records: Sequence[dict[str, Any]], planners: Sequence[str] | N
                   ) -> tuple[list[str], list[list[Any]], set[str]]:
     """The per-step latency table (headers, rows) and where its numbers come from ("events",
     "episodes"); no rows when no measured-latency record has step times."""
-    measured = [r for r in records if r.get("status") == "ok" and _latency_mode(r) == "measured"]
+    measured = [r for r in records if r.get("status") == "ok" and latency_mode(r) == "measured"]
     per_planner: dict[str, tuple[str, dict[str, list[float]], list[float], int]] = {}
-    for p in _planner_order(measured, planners):
+    for p in planner_order(measured, planners):
         rs = [r for r in measured if r["planner"] == p]
         events = [e for r in rs for e in r.get("events", ()) if _deadline_bound(e) and e.get("parts_s")]
         if events:

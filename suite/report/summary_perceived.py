@@ -21,7 +21,7 @@ def paired_lines(base: Sequence[dict[str, Any]], other: Sequence[dict[str, Any]]
     """Per planner, over the scenes both ran: cans in the bin (base, other), their paired
     difference other - base in points with a 95% bootstrap interval over scenes, contacts, and
     the other's perception-induced failures."""
-    from suite.report.summary_moving_bin import bootstrap_mean_ci
+    from suite.report.summary_moving_bin_paired import bootstrap_mean_ci
 
     lines = []
     for p in planners:

@@ -9,15 +9,13 @@ from synthetic_runs import synthetic_records, write_run
 
 from suite.execution.jobs import read_moving_bin, write_moving_bin
 from suite.report.summary_moving_bin import (
-    bootstrap_mean_ci,
     latency_rows,
     moving_bin_rows,
     moving_bin_table,
-    paired_differences,
-    paired_rows,
     speed_cells,
     stages_cell,
 )
+from suite.report.summary_moving_bin_paired import bootstrap_mean_ci, paired_differences, paired_rows
 
 #: The fields the loop's records gained when replans joined on the move (an older file lacks them).
 NEW_RECORD_FIELDS = ("bin_seed", "path_index", "latency_mode", "release_mode", "cans_put_down", "cans_not_attempted",
@@ -225,7 +223,7 @@ def _paired_records():
 
 
 def test_paired_differences_pair_episodes_by_their_bin_path(monkeypatch):
-    import suite.report.summary_moving_bin as smb
+    import suite.report.summary_moving_bin_paired as smb
 
     monkeypatch.setattr(smb, "MIN_PAIRED", 2)  # the arithmetic over few episodes (the rule: its own test)
     monkeypatch.setattr(smb, "MIN_SCENES", 1)
@@ -272,7 +270,7 @@ def test_the_interval_resamples_scenes_not_episodes():
 
 
 def test_a_difference_over_too_few_episodes_is_never_established():
-    import suite.report.summary_moving_bin as smb
+    import suite.report.summary_moving_bin_paired as smb
 
     records = _paired_records()
     at_02 = next(d for d in paired_differences(records, planners=("ik", "rrt")) if d.speed_m_s == 0.2)
@@ -282,7 +280,7 @@ def test_a_difference_over_too_few_episodes_is_never_established():
 
 
 def test_a_difference_whose_interval_holds_zero_is_not_established(monkeypatch):
-    import suite.report.summary_moving_bin as smb
+    import suite.report.summary_moving_bin_paired as smb
 
     monkeypatch.setattr(smb, "MIN_PAIRED", 2)
     monkeypatch.setattr(smb, "MIN_SCENES", 1)
