@@ -57,6 +57,18 @@ class SceneMatch:
     n_dented: int = 0
     dented_matched: int = 0
 
+    def record(self, seed: int) -> dict:
+        """This scene's evaluation counts as an evaluation JSON stores them (`seed`: the scene's), with
+        the grasps on distractors by detection and distractor."""
+        return {
+            "seed": seed,
+            "cans": self.n_truth,
+            "detections": self.n_detected,
+            "matched": len(self.pairs),
+            "distractors": self.n_distractors,
+            "distractor_grasps": [{"detection": d, "distractor": name} for d, name in self.distractor_grasps],
+        }
+
 
 def distractors_of(spec: SceneSpec) -> tuple[Obstacle, ...]:
     """The scene's distractors: the obstacles a family stood on the plate (`distractor_N`)."""

@@ -6,15 +6,11 @@ import argparse
 import json
 import logging
 import sys
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from scenes.sensor import SENSOR_PRESETS
 from suite.cli.args import add_noise_arguments, add_scene_arguments, nonneg_float, positive_int, scene_from_args, spec_from_args
-
-if TYPE_CHECKING:
-    from perception.evaluate import SceneMatch
 
 log = logging.getLogger(__name__)
 
@@ -45,12 +41,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sweep", metavar="DIR",
                    help="with --evaluate --scenes N: every pipeline at every noise level of the sweep "
                         "(Gaussian and structured-light), one JSON per run and noise_sweep.png in DIR")
-
-
-def _noise_rng(seed: int) -> np.random.Generator:
-    from perception.pipeline import noise_rng
-
-    return noise_rng(seed)  # the same draws as executions on perceived grasps (`PerceptionSetup`)
 
 
 def _params(args: argparse.Namespace):
@@ -112,21 +102,9 @@ def code_commit() -> str | None:
     return head + "+dirty" if changed.returncode == 0 and changed.stdout.strip() else head
 
 
-def _scene_record(seed: int, m: SceneMatch) -> dict:
-    """One scene's evaluation counts, with the grasps on distractors by detection and distractor."""
-    return {
-        "seed": seed,
-        "cans": m.n_truth,
-        "detections": m.n_detected,
-        "matched": len(m.pairs),
-        "distractors": m.n_distractors,
-        "distractor_grasps": [{"detection": d, "distractor": name} for d, name in m.distractor_grasps],
-    }
-
-
 def run(args: argparse.Namespace) -> int:
     from perception.evaluate import aggregate, match_scene
-    from perception.pipeline import GRASP_CAMERA, perceive
+    from perception.pipeline import GRASP_CAMERA, noise_rng, perceive
     from scenes.errors import SuiteError
 
     if args.scenes > 1 and not args.evaluate:
@@ -144,7 +122,8 @@ def run(args: argparse.Namespace) -> int:
 
     scene = scene_from_args(args)
     spec = scene.spec
-    res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(scene.seed), all_cameras=bool(args.images),
+    # noise_rng: the same draws as executions on perceived grasps (`PerceptionSetup`)
+    res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=noise_rng(scene.seed), all_cameras=bool(args.images),
                    params=_params(args), pipeline=args.pipeline, sensor=_sensor(args))
     out: dict = {
         "detections": [d.to_json() for d in res.detections],
@@ -157,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
         acc = aggregate([m])
         on_distractor = dict(m.distractor_grasps)
         out["evaluation"] = acc.to_json()
-        out["distractor_grasps"] = _scene_record(scene.seed, m)["distractor_grasps"]
+        out["distractor_grasps"] = m.record(scene.seed)["distractor_grasps"]
     if args.images:
         from perception.debug_images import write_debug_images
 
@@ -188,10 +167,11 @@ def run(args: argparse.Namespace) -> int:
 
 def _world_image(args: argparse.Namespace, scene) -> None:
     """Build the scene's perceived world (the same setup and noise draws) and draw it beside the truth."""
+    from perception.pipeline import noise_rng
     from perception.world import perceive_world
     from suite.report.plots_perceived_world import perceived_world_figure
 
-    _, world = perceive_world(scene, setup=_setup(args), rng=_noise_rng(scene.seed))
+    _, world = perceive_world(scene, setup=_setup(args), rng=noise_rng(scene.seed))
     s = world.summary()
     print(f"perceived world: {s['boxes']} voxel boxes ({1e3 * s['voxel_m']:g} mm voxels, {s['voxels']} occupied), "
           f"{s['cans']} cans padded {1e3 * s['can_padding_m']:g} mm, built in {s['build_time_s']:.2f} s; "
@@ -205,7 +185,7 @@ def _run_many(args: argparse.Namespace) -> int:
     half a can radius of a distractor's footprint is a grasp on that distractor.
     """
     from perception.evaluate import aggregate, lookalike_lines, match_lookalikes, match_scene
-    from perception.pipeline import perceive, side_cameras
+    from perception.pipeline import noise_rng, perceive, side_cameras
     from scenes.errors import SuiteError
     from scenes.generate import generate_scene
 
@@ -226,12 +206,12 @@ def _run_many(args: argparse.Namespace) -> int:
             log.warning("seed %d skipped: %s", seed, exc)
             skipped.append(seed)
             continue
-        res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=_noise_rng(seed), params=_params(args),
+        res = perceive(scene, depth_noise_m=args.depth_noise_m, rng=noise_rng(seed), params=_params(args),
                        pipeline=args.pipeline, sensor=sensor)
         m = match_scene(res.detections, scene)
         matches.append(m)
         looks.append(match_lookalikes(res.detections, scene))
-        records.append({**_scene_record(seed, m), "hourglass_grasps": looks[-1].hourglass_grasps,
+        records.append({**m.record(seed), "hourglass_grasps": looks[-1].hourglass_grasps,
                         "dented_grasped": len(looks[-1].dented_xy_error_m),
                         **({} if res.plate_noise_m is None else {"plate_noise_m": round(res.plate_noise_m, 6)})})
         proc_s.append(res.process_time_s)

@@ -39,12 +39,12 @@ def sweep_sensors():
 
 def run_sweep(args: argparse.Namespace) -> int:
     from perception.evaluate import aggregate, match_scene
+    from perception.grasps import PerceptionParams
     from perception.observe import observe, sense
-    from perception.pipeline import GRASP_CAMERA, detect
+    from perception.pipeline import GRASP_CAMERA, detect, noise_rng
     from scenes.errors import SuiteError
     from scenes.generate import generate_scene
     from suite.cli.args import spec_from_args
-    from suite.cli.perceive import _noise_rng, _params, _scene_record
     from suite.report.plots_perception import noise_sweep_figure
 
     out = Path(args.sweep)
@@ -63,18 +63,18 @@ def run_sweep(args: argparse.Namespace) -> int:
             continue
         frames.append((scene, observe(scene, cameras=[GRASP_CAMERA])[GRASP_CAMERA]))
     plate_z = float(frames[0][1].X_WC[2, 3] - spec.plate_top_z_m)  # the top camera's distance to the plate
-    params = _params(args)
+    params = PerceptionParams(segmentation=args.segmentation)
     for name, sensor in sweep_sensors():
         for pipeline in SWEEP_PIPELINES:
             matches, records, proc_s = [], [], []
             for scene, clean in frames:
-                image = clean if sensor is None else sense(clean, sensor=sensor, rng=_noise_rng(scene.seed))
+                image = clean if sensor is None else sense(clean, sensor=sensor, rng=noise_rng(scene.seed))
                 t0 = time.perf_counter()
                 dets, _, _ = detect(image, scene.spec, params=params, pipeline=pipeline)
                 proc_s.append(time.perf_counter() - t0)
                 m = match_scene(dets, scene)
                 matches.append(m)
-                records.append(_scene_record(scene.seed, m))
+                records.append(m.record(scene.seed))
             acc = aggregate(matches)
             sigma = 0.0 if sensor is None else sensor.depth_sigma_at_m(plate_z)
             doc = {"variant": spec.variant, "seeds": [args.seed, seed], "segmentation": args.segmentation,
