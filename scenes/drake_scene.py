@@ -209,7 +209,7 @@ def add_scene_to_plant(
     )
     if moving_bodies is not None:
         # The driven bin slides over the table top it stands on (and past nothing else static:
-        # its region is clear of the plate and the wall, `scenes.moving_bin.check_scenario`).
+        # its region is clear of the plate and the wall, `scenes.moving_bin_check.check_scenario`).
         decl = CollisionFilterDeclaration()
         decl.ExcludeBetween(plant.CollectRegisteredGeometries(list(moving_bodies)),
                             plant.CollectRegisteredGeometries([plant.world_body(), plate_body]))

@@ -110,7 +110,8 @@ def speed_list(text: str) -> tuple[float, ...]:
 def moving_bin_scenario(args: argparse.Namespace, config: CompareConfig):
     """The scenario of --moving-bin (its YAML's settings, every field checked), checked against the
     open and wall stations of the run's spec (region, reach): one SuiteError line before any work."""
-    from scenes.moving_bin import MOVING_BIN_FAMILIES, check_scenario, make_scenario
+    from scenes.moving_bin import MOVING_BIN_FAMILIES, make_scenario
+    from scenes.moving_bin_check import check_scenario
     from scenes.spec import load_spec
 
     if not args.execute:

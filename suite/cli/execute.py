@@ -93,7 +93,8 @@ def run(args: argparse.Namespace) -> int:
 def _moving_bin(args: argparse.Namespace, scene, out: Path, cls, config) -> int:
     """`execute --moving-bin SPEED`: plan the scene's approaches, descents and lifts, then run the
     moving-bin loop in physics."""
-    from scenes.moving_bin import check_scenario, make_scenario
+    from scenes.moving_bin import make_scenario
+    from scenes.moving_bin_check import check_scenario
     from suite.cli.compare import _config_file
     from suite.execution.jobs import run_jobs
     from suite.execution.jobs import write_moving_bin

@@ -16,7 +16,8 @@ from collections.abc import Sequence
 from typing import Any
 
 from scenes.grasp_rule import truth_grasp
-from scenes.moving_bin import MovingBinScenario, check_scenario
+from scenes.moving_bin import MovingBinScenario
+from scenes.moving_bin_check import check_scenario
 from scenes.scene import Scene
 from suite.execution.config import ExecutionConfig
 from suite.execution.moving_bin_records import NOT_APPLICABLE, MovingBinJob, MovingBinRecord, episode_seed

@@ -216,7 +216,7 @@ def plan_online(
     X_goal = template.X_WG_goal
     if q_goal is None:
         # the aim stays over the bin's region: the bin never leaves it (and the arm's reach is
-        # checked over it, `scenes.moving_bin.check_scenario`)
+        # checked over it, `scenes.moving_bin_check.check_scenario`)
         lo, hi = region(scenario, spec)
         aim = np.asarray(bin_xy_m, float) + (0.0 if drop_offset_m is None else np.asarray(drop_offset_m, float))
         aim = np.clip(aim, lo, hi)

@@ -8,7 +8,8 @@ import pytest
 
 from scenes.errors import SuiteError
 from scenes.generate import generate_scene
-from scenes.moving_bin import PATH_DT_S, bin_path, check_scenario, make_scenario, region, spec_with_bin_at
+from scenes.moving_bin import PATH_DT_S, bin_path, make_scenario, region, spec_with_bin_at
+from scenes.moving_bin_check import check_scenario
 from scenes.spec import load_spec
 from suite.execution.bin_estimate import BinEstimator
 
