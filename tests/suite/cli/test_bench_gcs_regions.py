@@ -1,5 +1,5 @@
 """`bench gcs-regions`: its world selection and its summary (the builds themselves are measured,
-not tested: `tests/planners/test_gcs.py` tests the strategies)."""
+not tested: `tests/planners/gcs/test_gcs.py` tests the strategies)."""
 
 from suite.bench.gcs_regions import parse_kinds, pick_worlds, summarize
 from suite.problems.dataset import load_dataset
