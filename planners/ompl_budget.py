@@ -5,7 +5,7 @@ On the CPU clock, a condition that reads the process's CPU time (`time.process_t
 Python callable. OMPL evaluates a condition from the thread that asks, and its Python bindings
 (2.0.1) keep the GIL held during `solve`: a planner that evaluates its condition from a thread of
 its own would deadlock on the callable. Of ours, PRM does (its solution-checking thread); it is
-solved in slices already (`ompl_rrt._OmplPlanner._solve_in_slices`), each slice a wall-timed
+solved in slices already (`ompl_solve.OmplPlanner._solve_in_slices`), each slice a wall-timed
 condition no longer than the CPU time left, which a process cannot overrun by more than its other
 threads' share of the slice: wall time is never less than one thread's CPU time.
 """

@@ -32,9 +32,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _plain_rrt_class():
     from ompl import geometric as og
 
-    from planners.ompl_rrt import RRTstarConfig, _OmplPlanner
+    from planners.ompl_rrt import RRTstarConfig
+    from planners.ompl_solve import OmplPlanner
 
-    class PlainRRT(_OmplPlanner):
+    class PlainRRT(OmplPlanner):
         """OMPL's RRT: one goal-biased tree from the start (RRT*'s settings, without its rewiring)."""
 
         name = "rrt-single-tree"

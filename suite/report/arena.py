@@ -203,7 +203,7 @@ PROGRESS_PROPERTIES = ("best cost REAL", "time REAL")
 
 def _progress_lines(records: Sequence[dict[str, Any]]) -> list[str]:
     """The progress block of one planner: every run's (best cost, time) points as "c,t,;c,t,;",
-    written when any of its runs recorded progress (`stats.progress`, see planners.ompl_rrt)."""
+    written when any of its runs recorded progress (`stats.progress`, see planners.ompl_solve)."""
     series = [(r.get("stats") or {}).get("progress") for r in records]
     if not any(series):
         return []
