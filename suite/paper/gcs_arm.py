@@ -123,13 +123,8 @@ def build_dataset(*, name: str = DATASET, search_s: float = 20.0, rrt_starts: in
     Raises:
         SuiteError: a problem the search cannot solve with a certified path (none is dropped).
     """
-    from suite.problems.dataset import (
-        FORMAT_VERSION,
-        dataset_dir,
-        dataset_hash,
-        problem_record,
-        scene_record,
-    )
+    from suite.problems.dataset import FORMAT_VERSION, dataset_dir
+    from suite.problems.stored import dataset_hash, problem_record, scene_record
     from suite.problems.identity import problem_id, straight_line
     from suite.run.best_known import search_job
     from suite.run.build_dataset import write_dataset_files

@@ -36,18 +36,8 @@ from typing import Any
 import numpy as np
 
 from scenes.errors import SuiteError
-from suite.problems.dataset import (
-    MANIFEST_FILE,
-    PROBLEMS_FILE,
-    SCENES_FILE,
-    _read_jsonl,
-    dataset_dir,
-    dataset_hash,
-    problem_from_record,
-    read_manifest,
-    record_hash,
-    scene_from_record,
-)
+from suite.problems.dataset import MANIFEST_FILE, PROBLEMS_FILE, SCENES_FILE, _read_jsonl, dataset_dir, read_manifest
+from suite.problems.stored import dataset_hash, problem_from_record, record_hash, scene_from_record
 from suite.run.polish import path_length, polish
 
 JOURNAL_FILE = "search.jsonl"

@@ -31,16 +31,8 @@ from typing import Any
 import numpy as np
 
 from scenes.errors import SuiteError
-from suite.problems.dataset import (
-    FORMAT_VERSION,
-    MANIFEST_FILE,
-    PROBLEMS_FILE,
-    SCENES_FILE,
-    dataset_dir,
-    dataset_hash,
-    problem_record,
-    scene_record,
-)
+from suite.problems.dataset import FORMAT_VERSION, MANIFEST_FILE, PROBLEMS_FILE, SCENES_FILE, dataset_dir
+from suite.problems.stored import dataset_hash, problem_record, scene_record
 from scenes.identity_rule import CURRENT_RULE
 from suite.problems.identity import problem_id, straight_line
 from suite.run.references import clearance_summary, plan_references, straight_certified

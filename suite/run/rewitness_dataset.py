@@ -16,17 +16,8 @@ import time
 from typing import Any
 
 from scenes.errors import SuiteError
-from suite.problems.dataset import (
-    PROBLEMS_FILE,
-    SCENES_FILE,
-    _read_jsonl,
-    dataset_dir,
-    dataset_hash,
-    problem_from_record,
-    read_manifest,
-    record_hash,
-    scene_from_record,
-)
+from suite.problems.dataset import PROBLEMS_FILE, SCENES_FILE, _read_jsonl, dataset_dir, read_manifest
+from suite.problems.stored import dataset_hash, problem_from_record, record_hash, scene_from_record
 
 
 def rewitness_dataset(name: str, *, argv: list[str]) -> dict[str, Any]:

@@ -99,7 +99,7 @@ def test_verify_rejects_a_colliding_reference(small, tmp_path):
     lines = (edited / "problems.jsonl").read_text().splitlines()
     k, rec = next((i, json.loads(line)) for i, line in enumerate(lines) if not json.loads(line)["trivial"])
     rec["reference"]["path"] = [rec["q_start"], rec["q_goal"]]  # the straight segment collides
-    from suite.problems.dataset import record_hash
+    from suite.problems.stored import record_hash
 
     rec["reference_length_rad"] = float(np.linalg.norm(np.subtract(rec["q_goal"], rec["q_start"])))
     rec["record_hash"] = record_hash(rec)  # even with a re-computed record hash

@@ -79,7 +79,7 @@ def test_the_build_settings_still_pose_the_stored_problems(rec):
     from scenes.generate import generate_scene
     from scenes.grasp_rule import truth_grasp
     from suite.problems.cycle import build_problems
-    from suite.problems.dataset import problem_from_record, scene_from_record
+    from suite.problems.stored import problem_from_record, scene_from_record
     from suite.run.build_dataset import family_spec, pose_settings
 
     manifest = read_manifest(dataset_dir(DEFAULT_DATASET))

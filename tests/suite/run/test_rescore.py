@@ -135,7 +135,7 @@ def test_records_whose_world_cannot_be_rebuilt_keep_their_metrics(tmp_path, reco
 
 def test_a_dataset_run_takes_problems_and_references_from_the_dataset(tmp_path, records):
     from planners.base import PlanningProblem
-    from suite.problems.dataset import dataset_hash, problem_record, scene_record
+    from suite.problems.stored import dataset_hash, problem_record, scene_record
 
     rec = next(r for r in records if r["path"] and r["problem"] == "transit")
     world, X_goal = hand_built(rec)
