@@ -68,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
     from planners.tuned import objective as tuning_objective
     from planners.tuned import read_tuned
     from scenes.errors import SuiteError
-    from suite.cli.tune import _candidate_dir, candidate_trials, grid, recorded, tuning_problems
+    from suite.cli.tune import _candidate_dir, candidate_trials, grid, recorded
+    from suite.problems.dataset import tuning_problems
     from suite.report.tuning import choose, evaluate
     from suite.run.runner import run_trials
 

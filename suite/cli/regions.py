@@ -149,13 +149,11 @@ def _report(args: argparse.Namespace) -> int:
 
 def _build(args: argparse.Namespace) -> int:
     from planners.gcs.sets import world_hash
-    from suite.problems.dataset import dataset_dir, load_dataset, parse_dataset_arg
+    from suite.problems.dataset import dataset_dir, load_dataset, parse_dataset_arg, tuning_problems
 
     if args.scheduler and args.executor != "dask":
         raise SuiteError("--scheduler needs --executor dask")
     if args.tune_sample is not None:
-        from suite.cli.tune import tuning_problems
-
         ds, sample = tuning_problems(args.dataset, per_family=args.tune_sample, time_limit_s=5.0)
         problems = [p for p, _ in sample]
     else:

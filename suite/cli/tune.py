@@ -74,26 +74,6 @@ def offline_bound(planner: str) -> float | None:
     return getattr(planner_class(planner), "offline_bound_s", None)
 
 
-def tuning_problems(dataset: str, *, per_family: int | None, time_limit_s: float):
-    """The sample: the non-trivial problems of the tune split, up to per_family of each family
-    (None: all), lowest problem id first. Returns (dataset, [(problem, meta)])."""
-    from suite.problems.dataset import load_dataset, parse_dataset_arg
-
-    name, tier = parse_dataset_arg(dataset)
-    if tier != "all":
-        raise SuiteError(f"--dataset takes a dataset name (its tune split is used), got {dataset!r}")
-    ds = load_dataset(f"{name}:tune", time_limit_s=time_limit_s)
-    by_family: dict[str, list] = {}
-    for pid, problem in sorted(zip(ds.ids, ds.problems), key=lambda x: x[0]):
-        meta = ds.meta[pid]
-        if not meta.get("trivial"):
-            by_family.setdefault(str(meta["family"]), []).append((problem, meta))
-    chosen = [x for fam in sorted(by_family) for x in by_family[fam][:per_family]]
-    if not chosen:
-        raise SuiteError(f"dataset {name!r} has no non-trivial problem in its tune split")
-    return ds, chosen
-
-
 def candidate_trials(planner: str, settings: dict, problems, *, seed: int) -> list:
     """One candidate's trials on the tuning problems [(problem, meta)]: the planner with these
     settings over its class defaults (not over its tuned file), the run seed `seed`."""
@@ -145,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _tune(args: argparse.Namespace, out: Path) -> int:
     from planners.tuned import config_path, objective as tuning_objective
+    from suite.problems.dataset import tuning_problems
     from suite.report.tuning import RULE, WEIGHTINGS, choose, choose_explained, evaluate, table_rows, weak_families
     from suite.run.runner import run_trials
 

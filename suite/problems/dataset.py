@@ -261,6 +261,26 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
     return Dataset(name, manifest["hash"], tier, manifest, tuple(ids), tuple(problems), meta, refs, steps, orders, wits)
 
 
+def tuning_problems(dataset: str, *, per_family: int | None, time_limit_s: float
+                    ) -> tuple[Dataset, list[tuple[PlanningProblem, dict[str, Any]]]]:
+    """The tuning sample of dataset NAME (`tune`, `regions --tune-sample`): the non-trivial problems
+    of its tune split, up to per_family of each family (None: all), lowest problem id first.
+    Returns (the tune split, [(problem, meta)])."""
+    name, tier = parse_dataset_arg(dataset)
+    if tier != ALL:
+        raise SuiteError(f"--dataset takes a dataset name (its tune split is used), got {dataset!r}")
+    ds = load_dataset(f"{name}:tune", time_limit_s=time_limit_s)
+    by_family: dict[str, list] = {}
+    for pid, problem in sorted(zip(ds.ids, ds.problems), key=lambda x: x[0]):
+        meta = ds.meta[pid]
+        if not meta.get("trivial"):
+            by_family.setdefault(str(meta["family"]), []).append((problem, meta))
+    chosen = [x for fam in sorted(by_family) for x in by_family[fam][:per_family]]
+    if not chosen:
+        raise SuiteError(f"dataset {name!r} has no non-trivial problem in its tune split")
+    return ds, chosen
+
+
 def dataset_scene(name: str, scene_key: str) -> Scene:
     """One stored scene of a dataset, by its key."""
     for _, _, rec in _read_jsonl(dataset_dir(name) / SCENES_FILE):

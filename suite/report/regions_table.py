@@ -105,11 +105,9 @@ def family_table(rows: list[dict]) -> list[dict[str, Any]]:
 
 def report(dataset: str, *, tune_sample: int | None, options) -> dict[str, Any]:
     """The table of the cached sets of `options` for a dataset tier, or for `tune --per-family N`'s sample."""
-    from suite.problems.dataset import load_dataset
+    from suite.problems.dataset import load_dataset, tuning_problems
 
     if tune_sample is not None:
-        from suite.cli.tune import tuning_problems
-
         _, sample = tuning_problems(dataset, per_family=tune_sample, time_limit_s=5.0)
         problems, metas = [p for p, _ in sample], [m for _, m in sample]
     else:

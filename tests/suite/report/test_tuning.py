@@ -13,7 +13,8 @@ from planners.registry import planner_class
 from planners.registry import BUILTIN
 from planners.tuned import objective, search_space, tuned_settings
 from scenes.errors import SuiteError
-from suite.cli.tune import grid, search_exclude, tuning_problems
+from suite.cli.tune import grid, search_exclude
+from suite.problems.dataset import tuning_problems
 from suite.report.tuning import CandidateResult, choose, choose_explained, differs, evaluate, paired_ratio, weak_families
 from suite.run.trial import make_config
 from tests.suite.report.test_summary import record
