@@ -297,14 +297,14 @@ LOOKALIKE_SWEEP = PERCEPTION_RUNS / "lookalike-sweep-97300"
 def lookalike_sweep_table(root: Path) -> str:
     """docs/perception.md: the hourglass refusal curve per sensor and waist, from `LOOKALIKE_SWEEP`;
     refuses a sweep whose code was not a commit's."""
-    from suite.bench.lookalike import docs_table
+    from suite.report.lookalike_curve import refusal_table
 
     docs = []
     for path in sorted((root / LOOKALIKE_SWEEP).glob("*.json")):
         doc = json.loads(path.read_text(encoding="utf-8"))
         _check_commit((LOOKALIKE_SWEEP / path.name).as_posix(), doc.get("git_commit"), required=True)
         docs.append(doc)
-    return docs_table(sorted(docs, key=lambda d: (d["sensor"] != "none", d["sensor"])))
+    return refusal_table(sorted(docs, key=lambda d: (d["sensor"] != "none", d["sensor"])))
 
 
 def perception_correlated_table(root: Path) -> str:
