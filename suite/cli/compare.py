@@ -258,7 +258,7 @@ def _check_planner_configs(config: CompareConfig, *, source: str) -> None:
 def _resumed_settings(out: Path, values: dict, given: dict[str, tuple[str, object]]) -> dict:
     """The settings of the run being resumed, from its manifest; a setting given now that
     contradicts them is one error line (nothing is appended to a run of another configuration)."""
-    from suite.run.runner import MANIFEST_FILE, read_run_manifest
+    from suite.run.manifest import MANIFEST_FILE, read_run_manifest
 
     path = out / MANIFEST_FILE
     manifest = read_run_manifest(out)  # a newer manifest format is one error line
@@ -369,7 +369,7 @@ def _execute_moving_bin(trials, out: Path, config: CompareConfig, *, speeds, sce
     from suite.execution.jobs import run_jobs, write_moving_bin
     from suite.execution.moving_bin import run_moving_bin_job, sweep_jobs
     from suite.execution.moving_bin_records import modelled_latency
-    from suite.run.runner import update_manifest
+    from suite.run.manifest import update_manifest
 
     mine = [t for t in trials if t.problem.scene.variant in ("open", "wall")]
     base = _execution_jobs(mine, out, config, reperceive=False, replay_dir=None)
@@ -417,7 +417,7 @@ def _shared_steps(trials, steps, *, pose: dict) -> dict:
 def run(args: argparse.Namespace) -> int:
     from suite.run.interrupt import Interrupted, SignalGuard, reap_children
     from suite.run.journal import RecordWriteError
-    from suite.run.runner import update_manifest
+    from suite.run.manifest import update_manifest
 
     config = resolve_config(args)
     scenario = moving_bin_scenario(args, config) if getattr(args, "moving_bin", None) else None
@@ -463,14 +463,8 @@ def _recorded_counts(out: Path) -> dict[str, int | None]:
 def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path, *, scenario=None) -> int:
     """The run, with `out` locked: manifest, problems, trials, execution, report."""
     from suite.run.executors import cap_workers
-    from suite.run.runner import (
-        make_executor,
-        prepare_trials,
-        recorded_trial_ids,
-        run_trials,
-        update_manifest,
-        write_manifest,
-    )
+    from suite.run.manifest import update_manifest, write_manifest
+    from suite.run.runner import make_executor, prepare_trials, recorded_trial_ids, run_trials
 
     from planners.worlds import CHECKER_ENV
 

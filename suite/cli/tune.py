@@ -163,7 +163,7 @@ def _tune(args: argparse.Namespace, out: Path) -> int:
         from planners.worlds import checker
 
         excluded = search_exclude(args.planner)
-        from suite.run.runner import git_commit
+        from suite.run.manifest import git_commit
 
         data = {
             "planner": args.planner,

@@ -264,7 +264,7 @@ def _check_into(run_dir: Path, *, name: str, tier: str, planner: str) -> None:
 
 def _write_manifest(run_dir: Path, provenance: dict[str, Any], *, argv: list[str]) -> None:
     from suite.run.executors import cpu_description
-    from suite.run.runner import git_commit, versions
+    from suite.run.manifest import git_commit, versions
 
     ds = provenance["dataset"]
     manifest = {

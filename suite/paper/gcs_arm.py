@@ -130,7 +130,8 @@ def build_dataset(*, name: str = DATASET, search_s: float = 20.0, rrt_starts: in
     from suite.run.build_dataset import write_dataset_files
     from suite.run.executors import Job, LocalExecutor
     from suite.run.references import clearance_summary, straight_certified
-    from suite.run.runner import git_commit, versions, worker_init
+    from suite.run.manifest import git_commit, versions
+    from suite.run.runner import worker_init
     from suite.run.witnesses import MIN_WITNESS_CLEARANCE_M, choose_witness, witness_with_margin
     from suite.scoring.polyline import path_length_rad
     from scenes.identity_rule import CURRENT_RULE

@@ -47,7 +47,7 @@ class UnpublishableRun(SuiteError):
     """A block reads a run whose manifest records no commit or a dirty tree."""
 
 
-#: What `runner.git_commit` appends to the commit of a checkout with uncommitted changes.
+#: What `suite.run.manifest.git_commit` appends to the commit of a checkout with uncommitted changes.
 DIRTY = "+dirty"
 
 

@@ -199,7 +199,7 @@ def rereference_dataset(source: str, name: str, *, search_s: float = 20.0, rrt_s
     from suite.run.build_dataset import write_dataset_files
     from suite.run.executors import Job
     from suite.run.lock import LOCK_FILE, RunLock
-    from suite.run.runner import git_commit, versions
+    from suite.run.manifest import git_commit, versions
 
     src, out = dataset_dir(source), dataset_dir(name)
     manifest = read_manifest(src)
@@ -304,7 +304,7 @@ def refine_dataset(name: str, *, polish_s: float = 2.0, trajopt_s: float = TRAJO
     from suite.run.build_dataset import write_dataset_files
     from suite.run.executors import Job
     from suite.run.lock import LOCK_FILE, RunLock
-    from suite.run.runner import git_commit
+    from suite.run.manifest import git_commit
 
     out = dataset_dir(name)
     manifest = read_manifest(out)

@@ -246,7 +246,7 @@ def build_dataset(settings: BuildSettings, *, argv: list[str], progress_bar: boo
 
 
 def _build_locked(settings: BuildSettings, out, *, argv: list[str], progress_bar: bool) -> dict[str, Any]:
-    from suite.run.runner import git_commit, versions
+    from suite.run.manifest import git_commit, versions
 
     t0 = time.perf_counter()
 

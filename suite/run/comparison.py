@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from scenes.errors import SuiteError
-from suite.run.runner import MANIFEST_FILE, TRIALS_FILE, CompareConfig
+from suite.run.manifest import MANIFEST_FILE
+from suite.run.runner import TRIALS_FILE, CompareConfig
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +52,7 @@ def run_comparison(config: CompareConfig, *, out: Path, command: list[str], resu
     from suite.run.interrupt import Interrupted, SignalGuard, reap_children
     from suite.run.journal import RecordWriteError
     from suite.run.lock import RunLock
-    from suite.run.runner import update_manifest
+    from suite.run.manifest import update_manifest
 
     out = Path(out)
     before = frozenset(c.pid for c in multiprocessing.active_children())
@@ -77,7 +78,7 @@ def run_comparison(config: CompareConfig, *, out: Path, command: list[str], resu
 
 def _check_out(out: Path, config: CompareConfig, *, resume: bool) -> None:
     """`out` (locked) holds a run of `config`'s settings when resuming, and no run otherwise."""
-    from suite.run.runner import read_run_manifest
+    from suite.run.manifest import read_run_manifest
 
     if not resume:
         if (out / TRIALS_FILE).exists():
@@ -102,14 +103,8 @@ def _run_locked(config: CompareConfig, *, out: Path, command: list[str], resume:
     from suite.run.contention import machine_across, machine_sample, run_contention
     from suite.run.executors import cap_workers
     from suite.run.records import read_trials
-    from suite.run.runner import (
-        make_executor,
-        prepare_trials,
-        recorded_trial_ids,
-        run_trials,
-        update_manifest,
-        write_manifest,
-    )
+    from suite.run.manifest import update_manifest, write_manifest
+    from suite.run.runner import make_executor, prepare_trials, recorded_trial_ids, run_trials
 
     os.environ[CHECKER_ENV] = config.checker  # the workers (spawned from here) inherit it
     if resume:

@@ -44,7 +44,7 @@ def recertify_dataset(source: str, name: str, *, reference_time_s: float = 10.0,
     from suite.run.build_dataset import write_dataset_files
     from suite.run.references import plan_references
     from suite.run.lock import LOCK_FILE, RunLock
-    from suite.run.runner import git_commit, versions
+    from suite.run.manifest import git_commit, versions
 
     src, out = dataset_dir(source), dataset_dir(name)
     manifest = read_manifest(src)

@@ -25,7 +25,7 @@ def rewitness_dataset(name: str, *, argv: list[str]) -> dict[str, Any]:
     from suite.run.build_dataset import write_dataset_files
     from suite.run.references import clearance_summary
     from suite.run.lock import LOCK_FILE, RunLock
-    from suite.run.runner import git_commit
+    from suite.run.manifest import git_commit
     from suite.run.witnesses import MIN_WITNESS_CLEARANCE_M, witness_with_margin
 
     out = dataset_dir(name)

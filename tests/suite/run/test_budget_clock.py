@@ -229,7 +229,8 @@ def test_the_summary_warns_of_a_contended_run_and_names_its_trials(tmp_path):
 
 
 def test_the_manifest_records_the_cpu_budget_clock(tmp_path):
-    from suite.run.runner import CompareConfig, prepare_trials, read_run_manifest, write_manifest
+    from suite.run.manifest import read_run_manifest, write_manifest
+    from suite.run.runner import CompareConfig, prepare_trials
 
     config = CompareConfig(planners=("rrt",), budget_clock="cpu",
                            dataset=f"{DEFAULT_TIER}:family=wall,kind=transit")
