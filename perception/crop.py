@@ -21,6 +21,7 @@ EMPTY_RGB = (0, 0, 0)
 
 def work_volume_corners_W(spec: SceneSpec) -> np.ndarray:
     """The 8 corners (8, 3) of the plate's top face extruded up by a can's tallest extent, metres."""
+    spec.require("plate", "can", needed_by="perception's plate crop")
     cx, cy, _ = spec.plate.center_m
     sx, sy = spec.plate.size_m[:2]
     z0 = spec.plate_top_z_m
@@ -32,6 +33,7 @@ def work_volume_corners_W(spec: SceneSpec) -> np.ndarray:
 
 def plate_top_corners_W(spec: SceneSpec) -> np.ndarray:
     """The plate's top-face corners (4, 3) in order around the face, metres."""
+    spec.require("plate", needed_by="perception's plate outline")
     cx, cy, _ = spec.plate.center_m
     sx, sy = spec.plate.size_m[:2]
     z0 = spec.plate_top_z_m

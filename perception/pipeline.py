@@ -29,6 +29,8 @@ SEGMENTATIONS = ("color", "geometric")
 NOISE_STREAM = 7919
 #: the Gaussian sensor's (`--depth-noise-m`) fraction of dropped depth pixels
 GAUSSIAN_DROP_FRACTION = 0.01
+#: What a scene without a plate or a can model is told (`SceneSpec.require`).
+NEEDED_BY = "perception (it crops the plate and looks for cans on it)"
 
 
 def noise_rng(scene_seed: int, *extra: int) -> np.random.Generator:
@@ -164,6 +166,7 @@ def perceive(
     """
     if pipeline not in PIPELINES:
         raise SuiteError(f"unknown perception pipeline {pipeline!r}; allowed: {', '.join(PIPELINES)}")
+    scene.spec.require("plate", "can", needed_by=NEEDED_BY)  # before rendering
     cams = None if all_cameras else [GRASP_CAMERA] + [c for c in side_cameras(pipeline) if c in scene.spec.cameras.poses]
     t0 = time.perf_counter()
     images = observe(scene, cameras=cams, depth_noise_m=depth_noise_m, rng=rng, sensor=sensor)
@@ -211,6 +214,7 @@ def detect(image, spec, *, params: PerceptionParams = PerceptionParams(), pipeli
     `robust-top` and the paper's ignore them."""
     if pipeline not in PIPELINES:
         raise SuiteError(f"unknown perception pipeline {pipeline!r}; allowed: {', '.join(PIPELINES)}")
+    spec.require("plate", "can", needed_by=NEEDED_BY)
     if pipeline in ("robust", "robust-top"):
         from perception.robust import RobustParams, detect_cans_robust
 

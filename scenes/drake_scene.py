@@ -162,6 +162,8 @@ def add_scene_to_plant(
     plant.WeldFrames(plant.world_frame(), plate_body.body_frame())
     if moving_bin is not None and mode != "sim":
         raise ValueError("a moving bin is only modelled in 'sim' mode")
+    if moving_bin is not None:
+        spec.require("bin", needed_by="a moving bin")
     moving_bodies = _add_moving_bin(plant, spec, moving_bin, friction) if moving_bin is not None else None
     for obstacle in spec.obstacles():
         if moving_bodies is not None and obstacle.name in spec.bin.boxes():
@@ -175,8 +177,10 @@ def add_scene_to_plant(
         plant.RegisterCollisionGeometry(plant.world_body(), RigidTransform([0.0, 0.0, -ROOM_FLOOR_BELOW_TABLE_M - 0.5]),
                                         DrakeBox(40.0, 40.0, 1.0), "room_floor", friction)
 
-    can_shape = Cylinder(spec.can.radius_m, spec.can.height_m)
-    color = np.asarray(spec.can.color_rgba)
+    if scene.cans or held is not None:
+        spec.require("can", needed_by="a can in the Drake scene")
+        can_shape = Cylinder(spec.can.radius_m, spec.can.height_m)
+        color = np.asarray(spec.can.color_rgba)
     held_id = held.can.id if held is not None else None
     cans_instance = plant.AddModelInstance("cans")
     for can in scene.cans:

@@ -314,4 +314,5 @@ def draw_station(spec: SceneSpec, rng: np.random.Generator) -> SceneSpec:
     """The concrete station of a family spec (spec.family set), drawn from `rng`."""
     if spec.family is None:
         return spec
+    spec.require("plate", "bin", "can", "cans", "waypoints", needed_by=f"family {spec.variant!r} (a drawn can station)")
     return DRAWERS[type(spec.family)](spec.family, spec, rng)

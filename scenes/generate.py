@@ -44,6 +44,7 @@ def station_unreachable(spec: SceneSpec) -> str | None:
     from scenes.ik import Q_READY, PoseIk
     from scenes.scene import HeldCan
 
+    spec.require("plate", "can", "waypoints", needed_by="a station's reachability check")
     empty = Scene(spec, 0, ())
     rng = np.random.default_rng(0)
     ik = PoseIk(build_drake_scene(empty, mode="plan", cameras=False))
@@ -144,7 +145,8 @@ def picking_order(scene: Scene, *, failures: _IkFailures | None = None) -> tuple
 
 
 def generate_scene(spec: SceneSpec, *, seed: int, check_reachable: bool = True) -> Scene:
-    """Draw the station (for a family spec) and scatter `spec.cans.count` cans on the plate.
+    """Draw the station (for a family spec) and scatter `spec.cans.count` cans on the plate (a
+    world without cans, `spec.cans` None, is its spec alone).
 
     Every can lies wholly on the plate (with the edge margin), at least `min_gap_m` from every
     other can and from the drawn obstacles, upright or lying with a random yaw; with
@@ -159,6 +161,8 @@ def generate_scene(spec: SceneSpec, *, seed: int, check_reachable: bool = True) 
 
     The same seed gives the same scene: all randomness comes from one PCG64 generator.
     """
+    if spec.cans is None and spec.family is None:  # a world without cans: nothing to scatter
+        return Scene(spec, seed, ())
     rng = np.random.default_rng(seed)
     family = spec
     draws = MAX_STATION_DRAWS if family.family is not None else 1

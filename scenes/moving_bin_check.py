@@ -38,6 +38,7 @@ def check_scenario(scenario: MovingBinScenario, spec: SceneSpec, *, reach: bool 
     if spec.variant not in MOVING_BIN_FAMILIES or spec.family is not None:
         raise SuiteError(f"a moving bin runs on the {' and '.join(MOVING_BIN_FAMILIES)} families, not "
                          f"{spec.variant!r}")
+    spec.require("bin", "cans", needed_by="a moving bin")
     lo, hi = region(scenario, spec)
     c = np.array(spec.bin.center_xy_m, float)
     where = f"moving bin region {[list(map(float, lo)), list(map(float, hi))]}"

@@ -83,7 +83,8 @@ def render_overview(scene: Scene, *, q_iiwa: np.ndarray | None = None, width_px:
                     height_px: int = 720) -> np.ndarray:
     """A 3D view of the whole station (robot, plate, bin, obstacles) from an oblique camera.
 
-    The camera looks at the middle of base, plate and bin from 2.4 m away, 40 degrees above the
+    The camera looks at the middle of base, plate and bin (of the base and the middle of the
+    obstacles in a world without them) from 2.4 m away, 40 degrees above the
     table, from the side the plate and bin face (so the robot does not hide them), or from the
     robot's side when a shelf's back panel would hide the plate, and from the bin's side of a tall
     window wall (through the window).
@@ -94,7 +95,7 @@ def render_overview(scene: Scene, *, q_iiwa: np.ndarray | None = None, width_px:
     from scenes.spec import CameraPose
 
     spec = scene.spec
-    pts = np.array([[0.0, 0.0], spec.plate.center_m[:2], spec.bin.center_xy_m])
+    pts = np.array([[0.0, 0.0], *spec.work_xy_m()], float)
     target = np.array([*pts.mean(axis=0), 0.25])
     facing = pts[1:].mean(axis=0)
     az = float(np.arctan2(facing[1], facing[0])) if np.linalg.norm(facing) > 1e-6 else 0.0
@@ -102,7 +103,7 @@ def render_overview(scene: Scene, *, q_iiwa: np.ndarray | None = None, width_px:
     if any(o.name.startswith("shelf") for o in spec.extra):
         az += np.pi  # a shelf's back panel faces outward: look from the robot's side instead
     d, el = 2.4, np.radians(40.0)
-    if any(o.name == "wall_lintel" for o in spec.extra):
+    if spec.bin is not None and any(o.name == "wall_lintel" for o in spec.extra):
         # a tall window wall hides the bin behind it: look through the window from the bin's side
         az, el = float(np.arctan2(spec.bin.center_xy_m[1], spec.bin.center_xy_m[0])) + 0.5, np.radians(35.0)
     eye = target + d * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])

@@ -1,4 +1,5 @@
-"""A concrete scene: a spec plus the cans a seed put on the plate (the ground truth)."""
+"""A concrete scene: a spec plus the cans a seed put on the plate (the ground truth; none for a
+world without cans)."""
 
 from __future__ import annotations
 
@@ -98,17 +99,18 @@ class Scene:
     def to_json(self) -> dict:
         """The ground truth as printed by `python -m suite scene --json`: the plate, the cans, every
         static obstacle as a primitive (`{"name", "shape", "size_m", "X_WO"}`, X_WO row-major) and
-        the task waypoints (gripper positions)."""
-        plate = self.spec.plate
-        return {
-            "seed": self.seed,
-            "variant": self.variant,
-            "plate": {
-                "center_m": [plate.center_m[0], plate.center_m[1], self.spec.plate_top_z_m],
-                "size_m": [plate.size_m[0], plate.size_m[1]],
-            },
-            "cans": [c.to_json() for c in self.cans],
-            "obstacles": [o.to_json() for o in self.spec.obstacles()],
-            "waypoints_m": {k: [round(v, 6) for v in p] for k, p in dataclasses.asdict(self.spec.waypoints).items()},
-        }
+        the task waypoints (gripper positions); a scene without a plate or waypoints has no such
+        entry (the entries of a can station are as before they became optional: its key is too)."""
+        spec = self.spec
+        out: dict = {"seed": self.seed, "variant": self.variant}
+        if spec.plate is not None:
+            out["plate"] = {
+                "center_m": [spec.plate.center_m[0], spec.plate.center_m[1], spec.plate_top_z_m],
+                "size_m": [spec.plate.size_m[0], spec.plate.size_m[1]],
+            }
+        out["cans"] = [c.to_json() for c in self.cans]
+        out["obstacles"] = [o.to_json() for o in spec.obstacles()]
+        if spec.waypoints is not None:
+            out["waypoints_m"] = {k: [round(v, 6) for v in p] for k, p in dataclasses.asdict(spec.waypoints).items()}
+        return out
 

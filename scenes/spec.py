@@ -2,6 +2,9 @@
 
 A spec describes the static world (table, plate, bin, optional wall, further obstacles), the can
 model, the can generator's settings, the grasp rule's offsets, the task waypoints and the cameras.
+The plate, the bin, the can model, the cans and the waypoints make a can station; a world that is
+none (`gcs-arm`: shelves and bins) leaves them out (`plate: null`), and a consumer that needs one
+says so in one line (`SceneSpec.require`).
 Variants (`open`, `wall`) are overrides merged into the base spec before it is parsed. Families
 (`station`, `shelf`, `window`, `clutter`, see `scenes.families`) carry ranges instead: the scene
 generator draws a concrete station from them with the scene's seed.
@@ -232,18 +235,32 @@ class RegionSeeds:
     joints_rad: dict[str, Vec7]
 
 
+#: The parts of a can station a spec may leave out (a world that is no can station).
+OPTIONAL_PARTS = ("plate", "bin", "can", "cans", "waypoints")
+#: What a spec with cans must have besides them.
+STATION_PARTS = ("plate", "bin", "can", "waypoints")
+
+
 @dataclasses.dataclass(frozen=True)
 class SceneSpec:
     """Everything static about a scene; with a seed it fully determines a `Scene`."""
 
     variant: str
     table: Box
-    plate: Box
-    bin: BinSpec
-    can: CanModel
-    cans: CanGenerator
+    #: The parts of a can station, each optional (a world that is no can station leaves them out:
+    #: `gcs-arm`); a spec with `cans` must have all of them (`__post_init__`). They are left out of
+    #: `to_dict` while None, so a spec that has them all hashes as before they became optional.
+    #: The plate the cans lie on.
+    plate: Box | None = dataclasses.field(default=None, kw_only=True)
+    #: The bin the cans are recycled into.
+    bin: BinSpec | None = dataclasses.field(default=None, kw_only=True)
+    #: The can model (what is scattered, grasped and held).
+    can: CanModel | None = dataclasses.field(default=None, kw_only=True)
+    #: How cans are scattered on the plate; None: a world without cans.
+    cans: CanGenerator | None = dataclasses.field(default=None, kw_only=True)
     grasp: GraspSpec
-    waypoints: Waypoints
+    #: The nominal cycle's gripper positions (above the plate, the middle, above the bin).
+    waypoints: Waypoints | None = dataclasses.field(default=None, kw_only=True)
     cameras: CameraSpec
     wall: Box | None = None
     #: further obstacles drawn by a family's generator (shelf, window frame, distractors, a turned wall)
@@ -260,19 +277,49 @@ class SceneSpec:
     def __post_init__(self):
         if self.robot not in ROBOTS:
             raise FieldError("robot", f"{self.robot!r} is not a robot variant; allowed: {', '.join(ROBOTS)}")
+        if self.cans is not None:  # cans lie on the plate and go to the bin along the waypoints
+            for part in STATION_PARTS:
+                if getattr(self, part) is None:
+                    raise FieldError(part, f"a spec with cans is a can station: it needs a {part} "
+                                           f"({', '.join(STATION_PARTS)}), or no cans")
+
+    def require(self, *parts: str, needed_by: str) -> None:
+        """Raise a one-line SuiteError naming the first of `parts` (optional fields: plate, bin,
+        can, cans, waypoints) this spec leaves out.
+
+        Args:
+            parts: the optional fields `needed_by` reads.
+            needed_by: what needs them, as the message names it ("perception's plate crop").
+        """
+        for part in parts:
+            if getattr(self, part) is None:
+                raise SuiteError(f"scene {self.variant!r} has no {part} (field '{part}'): {needed_by} needs one")
 
     @property
     def plate_top_z_m(self) -> float:
-        """Height of the plate's top face."""
+        """Height of the plate's top face (SuiteError for a spec without a plate)."""
+        self.require("plate", needed_by="the plate's top face")
         return self.plate.center_m[2] + self.plate.size_m[2] / 2
 
     def static_boxes(self) -> dict[str, Box]:
-        """Every static obstacle as a named box (table, plate, bin parts, wall)."""
-        table = self.table
-        boxes = {"table": table, "plate": self.plate, **self.bin.boxes()}
+        """Every static obstacle as a named box (table, plate, bin parts, wall; those it has)."""
+        boxes = {"table": self.table}
+        if self.plate is not None:
+            boxes["plate"] = self.plate
+        if self.bin is not None:
+            boxes.update(self.bin.boxes())
         if self.wall is not None:
             boxes["wall"] = self.wall
         return boxes
+
+    def work_xy_m(self) -> np.ndarray:
+        """Where the work is, (K, 2) m in the world's xy (for a camera to look at): the plate's and
+        the bin's centres, those the spec has; in a world with neither, the middle of its further
+        obstacles (a point ahead of the robot if it has none)."""
+        work = [p[:2] for p in (self.plate and self.plate.center_m, self.bin and self.bin.center_xy_m) if p]
+        if not work:
+            work = [np.mean([o.pose()[:2, 3] for o in self.extra], axis=0) if self.extra else (0.5, 0.0)]
+        return np.array(work, float)
 
     def obstacles(self) -> tuple[Obstacle, ...]:
         """Every static obstacle as a primitive: the static boxes, then the drawn extras."""
@@ -281,6 +328,7 @@ class SceneSpec:
     def with_can_count(self, count: int) -> "SceneSpec":
         """A copy with another number of cans (for a family that draws the count, e.g. `clutter`,
         its range becomes exactly `count`)."""
+        self.require("cans", needed_by="a can count")
         family = self.family
         if family is not None and hasattr(family, "cans"):
             family = dataclasses.replace(family, cans=(count, count))
@@ -288,21 +336,28 @@ class SceneSpec:
 
     def with_min_gap(self, min_gap_m: float) -> "SceneSpec":
         """A copy with another minimum gap between cans."""
+        self.require("cans", needed_by="a gap between cans")
         return dataclasses.replace(self, cans=dataclasses.replace(self.cans, min_gap_m=min_gap_m))
 
     def with_can_color(self, color_rgba: tuple[float, float, float, float]) -> "SceneSpec":
         """A copy whose cans have another colour."""
+        self.require("can", needed_by="a can colour")
         return dataclasses.replace(self, can=dataclasses.replace(self.can, color_rgba=color_rgba))
 
     def to_dict(self) -> dict[str, Any]:
         """A plain, JSON-able dict (used for hashing, manifests and datasets). The family fields are
-        left out while unused, so the fixed variants hash as they did before families existed."""
+        left out while unused, so the fixed variants hash as they did before families existed, and
+        so are the parts of a can station a spec leaves out (a spec with all of them hashes as
+        before they became optional)."""
         d = dataclasses.asdict(self)
+        for part in OPTIONAL_PARTS:
+            if d[part] is None:
+                del d[part]
         if not d["extra"]:
             del d["extra"]
         if d["family"] is None:
             del d["family"]
-        if d["cans"]["placement"] == "random":
+        if "cans" in d and d["cans"]["placement"] == "random":
             del d["cans"]["placement"]
         if d["robot"] == DEFAULT_ROBOT:
             del d["robot"]
@@ -310,7 +365,7 @@ class SceneSpec:
             del d["region_seeds"]
         if d["cameras"]["sensor"] is None:
             del d["cameras"]["sensor"]
-        if d["bin"]["floor_thickness_m"] is None:
+        if "bin" in d and d["bin"]["floor_thickness_m"] is None:
             del d["bin"]["floor_thickness_m"]
         return d
 

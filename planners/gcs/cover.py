@@ -95,6 +95,7 @@ def task_chain(problem, *, seed: int, rrt_time_s: float = 2.0) -> tuple[np.ndarr
 
     world = planning_world(problem)
     t0 = time.perf_counter()
+    problem.scene.spec.require("waypoints", needed_by="gcs's task chain (a scene without waypoints gives its region_seeds)")
     wp = problem.scene.spec.waypoints
     X_plate, X_middle, X_bin = (waypoint_pose(p) for p in (wp.above_plate_m, wp.middle_m, wp.above_bin_m))
     poses = [X_plate, *_between(X_plate, X_middle, POSES_BETWEEN), X_middle,

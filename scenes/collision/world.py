@@ -115,6 +115,7 @@ class CollisionWorld(WorldBuild, MotionChecks):
         # --- robot parts (every part rides on one of the 9 FK bodies) ---
         held_can = None
         if held is not None:
+            spec.require("can", needed_by="a held can")
             m = spec.grasp.held_margin_m
             held_can = (held.X_GC, (spec.can.radius_m + m, spec.can.height_m + 2 * m))
         self.parts = parts = robot_parts(robot, opening, held_can)
@@ -125,9 +126,11 @@ class CollisionWorld(WorldBuild, MotionChecks):
         self.obstacles: list[tuple[str, fcl.CollisionObject]] = []
         obs_c, obs_h, obs_exact = [], [], []
         removed = set(removed_can_ids) | ({held.can.id} if held is not None else set())
-        r_can, h_can = spec.can.radius_m, spec.can.height_m
         prims = [(o.name, o.shape, o.size_m, o.pose(), o.axis_aligned_box) for o in spec.obstacles()]
-        prims += [(f"can_{c.id}", "cylinder", (r_can, h_can), c.X_WC(), False) for c in scene.cans if c.id not in removed]
+        if scene.cans:  # a world without cans has no can model either
+            r_can, h_can = spec.can.radius_m, spec.can.height_m
+            prims += [(f"can_{c.id}", "cylinder", (r_can, h_can), c.X_WC(), False) for c in scene.cans
+                      if c.id not in removed]
         if self.padding_m:
             prims = [(name, shape, grown_dims(shape, size, self.padding_m), X, exact) for name, shape, size, X, exact in prims]
         self._obs_prims = prims  # (name, shape, size, X_WO, axis-aligned box), padding included

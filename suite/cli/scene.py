@@ -45,9 +45,11 @@ def run(args: argparse.Namespace) -> int:
         from scenes.ik import Q_READY, PoseIk
         from scenes.render import render_overview
 
-        ik = PoseIk(build_drake_scene(scene, mode="plan", cameras=False))
-        q = ik.solve(waypoint_pose(scene.spec.waypoints.above_plate_m), q_seed=Q_READY,
-                     rng=np.random.default_rng(scene.seed))
+        q = None  # the arm above the plate; at its ready pose in a world without waypoints
+        if scene.spec.waypoints is not None:
+            ik = PoseIk(build_drake_scene(scene, mode="plan", cameras=False))
+            q = ik.solve(waypoint_pose(scene.spec.waypoints.above_plate_m), q_seed=Q_READY,
+                         rng=np.random.default_rng(scene.seed))
         _write_png(args.view, render_overview(scene, q_iiwa=Q_READY if q is None else q))
         if not args.json:
             print(f"3D view written to {args.view}")

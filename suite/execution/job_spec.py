@@ -63,3 +63,4 @@ class ExecutionJob:
             from scenes.errors import SuiteError
 
             raise SuiteError(f"unknown on-failure policy {self.on_failure!r}; allowed: {', '.join(ON_FAILURE)}")
+        self.scene.spec.require("cans", needed_by="execution in physics (the pick-and-place cycle)")

@@ -90,7 +90,7 @@ def meshcat_for(scene: Scene):
     meshcat = Meshcat()
     # Look at the work area (plate, wall, bin) from the front right, a little above the arm.
     spec = scene.spec
-    target = (np.array([*spec.plate.center_m[:2], 0.1]) + np.array([*spec.bin.center_xy_m, 0.1])) / 2
+    target = np.array([*np.mean(spec.work_xy_m(), axis=0), 0.1])
     meshcat.SetCameraPose(target + np.array([1.3, -0.9, 0.8]), target)
     return meshcat
 

@@ -155,6 +155,7 @@ def build_problems(
         or q_start NaN); they are reported, not dropped. The next cycle starts above the plate.
     """
     spec = scene.spec
+    spec.require("waypoints", "can", needed_by="the pick-and-place cycle")
     wp = spec.waypoints
     task = tuple(waypoint_pose(p) for p in (wp.above_plate_m, wp.middle_m, wp.above_bin_m))
     X_plate = task[0]

@@ -52,7 +52,7 @@ def world_content(problem: PlanningProblem, *, rule: str = CURRENT_RULE) -> dict
         "robot": robot_hash(spec.robot),
         "obstacles": [{"shape": o.shape, "size_m": r(o.size_m), "X_WO": r(o.X_WO),
                        "rests_held_can": o.name == "plate"} for o in spec.obstacles()],
-        "can": [spec.can.radius_m, spec.can.height_m],
+        "can": None if spec.can is None else [spec.can.radius_m, spec.can.height_m],  # None: a world without cans
         "cans": cans,
         "held": held,
         "gripper_opening_m": hashed_scalar(problem.gripper_opening_m, rule=rule),

@@ -17,6 +17,7 @@ def perceived_world_figure(truth, world, out: str | Path, *, title: str = "") ->
     from perception.world import LOOSE_PREFIXES, VOXEL_PREFIX
 
     spec = truth.spec
+    spec.require("plate", "can", needed_by="the perceived world's figure")
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [1.15, 1]})
     for ax, dims, name in ((axes[0], TOP, "from above (x, y)"), (axes[1], SIDE, "from the front (y, z)")):
         ax.add_patch(plt.Polygon(primitive_outline("box", spec.plate.size_m, _at(spec.plate.center_m), dims=dims),

@@ -60,16 +60,19 @@ def _translation(center_m) -> np.ndarray:
 
 
 def scene_outlines(spec, cans: Sequence = (), *, dims: tuple[int, int]) -> list[Outline]:
-    """Plate, bin, the spec's wall, every family obstacle and the cans, on the view `dims`.
+    """Plate, bin, the spec's wall, every family obstacle and the cans, on the view `dims` (those
+    the scene has: a world that is no can station has no plate or bin).
 
     Args:
         spec: the scene's `SceneSpec`.
         cans: the cans on the plate (`CanPose`), e.g. a problem's scene without its recycled cans.
         dims: the view (`TOP` or `SIDE`).
     """
-    out = [Outline("plate", "plate", primitive_outline("box", spec.plate.size_m, _translation(spec.plate.center_m),
-                                                       dims=dims))]
-    for box in spec.bin.boxes().values():
+    out = []
+    if spec.plate is not None:
+        out.append(Outline("plate", "plate", primitive_outline("box", spec.plate.size_m, _translation(spec.plate.center_m),
+                                                               dims=dims)))
+    for box in (spec.bin.boxes() if spec.bin is not None else {}).values():
         out.append(Outline("bin", "bin", primitive_outline("box", box.size_m, _translation(box.center_m), dims=dims)))
     if spec.wall is not None:
         out.append(Outline("wall", "wall", primitive_outline("box", spec.wall.size_m, _translation(spec.wall.center_m),

@@ -157,6 +157,7 @@ class RecordedProblems:
 
         scene = self._scene(variant, seed)
         spec = scene.spec
+        spec.require("waypoints", "can", needed_by="posing a run's cycle problems again")
         wp = spec.waypoints
         X_plate, X_bin = waypoint_pose(wp.above_plate_m), waypoint_pose(wp.above_bin_m)
         opening, closed = spec.grasp.open_width_m, 2 * spec.can.radius_m

@@ -70,7 +70,8 @@ def test_a_scene_names_its_robot_and_the_default_hashes_as_before():
     paper = load_spec(variant="gcs-arm")
     assert paper.robot == "iiwa14-spheres" and paper.to_dict()["robot"] == "iiwa14-spheres"
     assert len(paper.region_seeds.poses) == 5 and len(paper.region_seeds.joints_rad) == 3
-    assert paper.static_boxes()["bin_floor"].size_m[2] == 0.015
+    assert paper.plate is None and paper.bin is None  # no can station: its bins are obstacles
+    assert next(o for o in paper.extra if o.name == "binL_bottom").size_m[2] == 0.015
     raw["variants"]["open"] = {"robot": "ur5"}
     with pytest.raises(SuiteError, match="robot.*'ur5' is not a robot variant; allowed: iiwa14-wsg, iiwa14-spheres"):
         loads_spec(yaml.safe_dump(raw), variant="open")
