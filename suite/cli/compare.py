@@ -1,4 +1,10 @@
-"""`python -m suite compare`: run every planner on every problem, then table, plots and exports."""
+"""`python -m suite compare`: run every planner on every problem, then table, plots and exports.
+
+The command reads its flags (over a --config file, and a resumed run's manifest) into one
+`suite.run.runner.CompareConfig`, every value checked before any work; the run itself is the
+runner's (trials), `suite.execution.run_plans`' (physics, with --execute) and `suite.report`'s
+(summary, plots, report.html), all with the run directory locked.
+"""
 
 from __future__ import annotations
 
@@ -18,7 +24,7 @@ from scenes.errors import SuiteError
 from scenes.schema import load
 from suite.problems import DEFAULT_TIER
 from suite.run.lock import RunLock
-from suite.run.runner import TRIALS_FILE, CompareConfig
+from suite.run.runner import TRIALS_FILE, CompareConfig, check_planner_configs, recorded_counts
 
 RESULTS_DIR = Path("results")
 #: Flags that describe generated scenes (they cannot be combined with --dataset).
@@ -227,7 +233,7 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     if isinstance(values["time_limit_s"], int) and not isinstance(values["time_limit_s"], bool):
         values["time_limit_s"] = float(values["time_limit_s"])
     config = load(CompareConfig, values, where=source)
-    _check_planner_configs(config, source=source)
+    check_planner_configs(config, source=source)
     if config.dataset:
         from suite.problems.dataset import check_selection
 
@@ -240,19 +246,6 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
 
         plan_world_for(config.grasps, config.world)  # --world perceived needs perceived grasps
     return config
-
-
-def _check_planner_configs(config: CompareConfig, *, source: str) -> None:
-    """Each planner's settings checked against its Config dataclass (only checked: the values as
-    given go into the trials, so their ids do not change)."""
-    from planners.registry import planner_class
-
-    for name, overrides in config.planner_configs.items():
-        try:
-            cfg_cls = planner_class(name).Config
-        except SuiteError as exc:
-            raise SuiteError(f"{source}planner_configs.{name}: {exc}") from None
-        load(cfg_cls, overrides, where=source, at=f"planner_configs.{name}")
 
 
 def _resumed_settings(out: Path, values: dict, given: dict[str, tuple[str, object]]) -> dict:
@@ -332,88 +325,6 @@ def resume_command(out: Path) -> str:
     return shlex.join(["python", "-m", "suite", "compare", "--resume", "--out", str(out)])
 
 
-def _execution_jobs(trials, out: Path, config: CompareConfig, *, reperceive: bool, replay_dir):
-    """One execution job per planner and scene, its plans from the run's records."""
-    from suite.execution.jobs import jobs_from_records
-    from suite.run.records import read_trials
-
-    steps, shared, orders = None, None, None
-    if config.dataset:
-        from suite.problems.dataset import load_dataset
-        from suite.run.build_dataset import pose_settings
-
-        dataset = load_dataset(config.dataset)
-        steps, orders = dataset.cycle_steps, dataset.picking_orders
-        shared = _shared_steps(trials, steps, pose=pose_settings(dataset.manifest))
-    return jobs_from_records(trials, read_trials(out / TRIALS_FILE), grasps=config.grasps,
-                             time_limit_s=config.time_limit_s, seed=config.seed, reperceive=reperceive,
-                             replay_dir=replay_dir, cycle_steps=steps, shared_steps=shared, picking_orders=orders,
-                             world=config.world)
-
-
-def _execute(trials, out: Path, config: CompareConfig, *, reperceive: bool, progress_bar: bool) -> None:
-    """Execute every planner's plans for every scene in physics; write execution.json."""
-    from suite.execution.jobs import run_jobs, write_execution
-
-    jobs = _execution_jobs(trials, out, config, reperceive=reperceive, replay_dir=out)
-    print(f"executing {len(jobs)} plan(s) in physics ({'closed loop' if reperceive else 'open loop'})...",
-          file=sys.stderr)
-    write_execution(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar))
-
-
-def _execute_moving_bin(trials, out: Path, config: CompareConfig, *, speeds, scenario, scenes: int, paths: int,
-                        progress_bar: bool) -> None:
-    """The moving-bin sweep: every planner on the run's first open and wall scenes, on `paths` bin
-    paths each, at every speed; write moving_bin.json (and a replay of each planner's episode on
-    the first scene at the middle speed); the manifest records the scenario (its latency mode)."""
-    from suite.execution.jobs import run_jobs, write_moving_bin
-    from suite.execution.moving_bin import run_moving_bin_job, sweep_jobs
-    from suite.execution.moving_bin_records import modelled_latency
-    from suite.run.manifest import update_manifest
-
-    mine = [t for t in trials if t.problem.scene.variant in ("open", "wall")]
-    base = _execution_jobs(mine, out, config, reperceive=False, replay_dir=None)
-    replay_speed = speeds[len(speeds) // 2]
-    jobs = sweep_jobs(base, speeds=speeds, scenario=scenario, scenes=scenes, paths=paths, replay_dir=out,
-                      replay_speed=replay_speed)
-    n_scenes = len({j.scene.key() for j in jobs})
-    latency = {p: modelled_latency(scenario, p) for p in config.planners} if scenario.latency_mode == "modelled" \
-        else None
-    update_manifest(out, moving_bin={"speeds_m_s": list(speeds), "scenes": n_scenes, "paths_per_scene": paths,
-                                     "latency_mode": scenario.latency_mode, "modelled_latency_s": latency,
-                                     "scenario": scenario.to_json()})
-    print(f"moving bin: {len(jobs)} episode(s) ({n_scenes} scene(s) x {paths} bin path(s) x {len(speeds)} speed(s) "
-          f"x {len(config.planners)} planner(s), latency {scenario.latency_mode})...", file=sys.stderr)
-    write_moving_bin(out, run_jobs(jobs, workers=config.jobs, progress_bar=progress_bar, run=run_moving_bin_job,
-                                   desc="moving bin"))
-
-
-def _shared_steps(trials, steps, *, pose: dict) -> dict:
-    """Cycle steps of the run's scenes stored in the dataset once, under another scene (identical
-    content, e.g. the last return of a fixed station): (scene key, can id, kind) -> problem_id.
-    Found by posing each scene's cycle again (goal IK, as the dataset was built: `pose`, the
-    dataset's `pose_settings`). A posed step is matched to a planned problem by the current
-    identity rule applied to both, so that last-bit noise of the posing (which differs between
-    machines) does not hide a match, whatever rule the dataset's own ids were made with."""
-    from scenes.grasp_rule import truth_grasp
-    from suite.problems.cycle import build_problems
-    from suite.problems.identity import problem_id
-
-    scenes = {t.problem.scene.key(): t.problem.scene for t in trials}
-    planned = {(t.problem.scene.key(), t.problem.can_id, t.problem.kind) for t in trials}
-    stored_id = {problem_id(t.problem): t.meta["problem_id"] for t in trials if t.meta.get("problem_id")}
-    shared = {}
-    for key, scene in scenes.items():
-        for p in build_problems(scene, [truth_grasp(scene, c) for c in scene.cans], time_limit_s=1.0, seed=scene.seed,
-                                **pose):
-            k = (key, p.can_id, p.kind)
-            if p.pre_status is None and k not in planned and k not in steps:
-                pid = stored_id.get(problem_id(p))
-                if pid is not None:
-                    shared[k] = pid
-    return shared
-
-
 def run(args: argparse.Namespace) -> int:
     from suite.run.interrupt import Interrupted, SignalGuard, reap_children
     from suite.run.journal import RecordWriteError
@@ -427,13 +338,13 @@ def run(args: argparse.Namespace) -> int:
         try:
             return _run_locked(args, config, out, scenario=scenario)
         except Interrupted as exc:
-            counts = _recorded_counts(out)
+            counts = recorded_counts(out, total=_TOTAL_TRIALS.get(str(out)))
             update_manifest(out, status="interrupted", interrupted_by=exc.name, stopped_utc=_now(), **counts)
             print(f"interrupted by {exc.name}: {counts['trials_recorded']} trial(s) recorded in {out} are kept; "
                   f"resume with: {resume_command(out)}", file=sys.stderr)
             return exc.exit_code
         except RecordWriteError as exc:
-            counts = _recorded_counts(out)
+            counts = recorded_counts(out, total=_TOTAL_TRIALS.get(str(out)))
             update_manifest(out, status="stopped", stop_reason=str(exc), stopped_utc=_now(), **counts)
             raise SuiteError(f"{exc}; the run stopped with {counts['trials_recorded']} trial(s) kept; once the cause "
                              f"is fixed, resume with: {resume_command(out)}") from None
@@ -448,16 +359,6 @@ def _now() -> str:
 
 #: The trial count of the run in progress (for the manifest of an interrupted run).
 _TOTAL_TRIALS: dict[str, int] = {}
-
-
-def _recorded_counts(out: Path) -> dict[str, int | None]:
-    from suite.run.runner import recorded_trial_ids
-
-    try:
-        recorded = len(recorded_trial_ids(out / TRIALS_FILE))
-    except (OSError, SuiteError):
-        recorded = None
-    return {"trials_recorded": recorded, "trials_total": _TOTAL_TRIALS.get(str(out))}
 
 
 def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path, *, scenario=None) -> int:
@@ -518,11 +419,15 @@ def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path, *, s
               f"waited for a CPU (or lost it to steal), {100 * (contention['cpu_wait_share'] or 0):.0f}% of the "
               "planning wall time in all; summary.md names them", file=sys.stderr)
     if scenario is not None:
-        _execute_moving_bin(trials, out, config, speeds=args.moving_bin, scenario=scenario,
-                            scenes=args.moving_bin_scenes, paths=args.moving_bin_paths,
-                            progress_bar=not args.no_progress)
+        from suite.execution.run_plans import execute_moving_bin
+
+        execute_moving_bin(trials, out, config, speeds=args.moving_bin, scenario=scenario,
+                           scenes=args.moving_bin_scenes, paths=args.moving_bin_paths,
+                           progress_bar=not args.no_progress)
     elif args.execute or args.reperceive:
-        _execute(trials, out, config, reperceive=args.reperceive, progress_bar=not args.no_progress)
+        from suite.execution.run_plans import execute_run
+
+        execute_run(trials, out, config, reperceive=args.reperceive, progress_bar=not args.no_progress)
     from suite.report.write import write_report
 
     table = write_report(out, plots=not args.no_plots, html=not args.no_html, wide=args.wide)

@@ -74,6 +74,21 @@ class CompareConfig:
     world: Literal["truth", "perceived"] | None = None
 
 
+def check_planner_configs(config: CompareConfig, *, source: str = "") -> None:
+    """Each planner's settings in `config.planner_configs` checked against its Config dataclass
+    (only checked: the values as given go into the trials, so their ids do not change); `source`
+    begins the error line (where the settings came from, e.g. "--config FILE: ")."""
+    from planners.registry import planner_class
+    from scenes.schema import load
+
+    for name, overrides in config.planner_configs.items():
+        try:
+            cfg_cls = planner_class(name).Config
+        except SuiteError as exc:
+            raise SuiteError(f"{source}planner_configs.{name}: {exc}") from None
+        load(cfg_cls, overrides, where=source, at=f"planner_configs.{name}")
+
+
 def worker_init() -> None:
     """Runs once in each worker process: quiet logs, OMPL's process-global seed set once, and the
     built-in planners imported up front (while the parent is still preparing problems). A planner
@@ -269,6 +284,16 @@ def recorded_trial_ids(path: Path) -> set[str]:
         with open(path, "r+b") as f:
             f.truncate(good_end)
     return ids
+
+
+def recorded_counts(out: Path, *, total: int | None) -> dict[str, int | None]:
+    """The trials recorded so far in run directory `out` (None if its trials.jsonl cannot be read)
+    and `total`, the run's trial count if known, as a stopped run's manifest names them."""
+    try:
+        recorded = len(recorded_trial_ids(out / TRIALS_FILE))
+    except (OSError, SuiteError):
+        recorded = None
+    return {"trials_recorded": recorded, "trials_total": total}
 
 
 def make_executor(executor: str, *, jobs: int, scheduler: str | None = None,
