@@ -63,6 +63,12 @@ class FailureReason(str, enum.Enum):
 
 #: The motions of the paper's pick-and-place cycle, in order.
 PROBLEM_KINDS = ("approach", "descend", "lift", "transit", "return")
+#: A free transit: a motion between two configurations that belongs to no can's cycle (nothing
+#: held, nothing picked up or put down), such as the GCS paper's tasks between its shelves and
+#: bins. A scene numbers its free transits by `PlanningProblem.task_index`; no can does.
+FREE_TRANSIT = "free"
+#: Every kind a problem may have: the cycle's motions, then the free transit.
+ALL_KINDS = (*PROBLEM_KINDS, FREE_TRANSIT)
 
 #: The clocks a planning budget is measured on (s): "wall" (`time.perf_counter`, the elapsed time a
 #: user waits) and "cpu" (`time.process_time`: the CPU time of the planner's process, all of its
@@ -150,12 +156,12 @@ class TaskWaypoint:
 
 @dataclasses.dataclass(frozen=True)
 class PlanningProblem:
-    """One motion of the pick-and-place cycle.
+    """One motion of the pick-and-place cycle, or a free transit.
 
     Attributes:
-        kind: one of PROBLEM_KINDS.
+        kind: one of PROBLEM_KINDS, or FREE_TRANSIT.
         scene: the scene (ground truth: what the robot really collides with).
-        can_id: the can this cycle picks (ground-truth id).
+        can_id: the can this cycle picks (ground-truth id); None for a free transit.
         q_start: start configuration (7,) rad.
         q_goal: goal configuration (7,) rad shared by every planner (collision-aware IK, computed
             once), or None when no IK solution exists (then `pre_status` is IK_FAILED).
@@ -176,11 +182,13 @@ class PlanningProblem:
             (the planner's process's CPU time; `Budget`).
         plan_world: the world the planner plans in when it is not `scene` (a perceived world:
             `for_planner`); None: the planner plans in the truth.
+        task_index: a free transit's number among its scene's tasks (0, 1, ...); None for a
+            cycle's motion, which its can numbers.
     """
 
     kind: str
     scene: Scene
-    can_id: int
+    can_id: int | None
     q_start: np.ndarray
     q_goal: np.ndarray | None
     X_WG_goal: np.ndarray
@@ -194,10 +202,27 @@ class PlanningProblem:
     warm_start: np.ndarray | None = None
     budget_clock: str = "wall"
     plan_world: PlanWorld | None = None
+    task_index: int | None = None
+
+    def __post_init__(self) -> None:
+        free = self.kind == FREE_TRANSIT
+        if self.kind not in ALL_KINDS or free != (self.task_index is not None) or free != (self.can_id is None):
+            from scenes.errors import SuiteError
+
+            raise SuiteError(f"problem kind {self.kind!r} with can_id {self.can_id} and task_index {self.task_index}: "
+                             f"a cycle's motion ({', '.join(PROBLEM_KINDS)}) has a can_id and no task_index, "
+                             f"a free transit ({FREE_TRANSIT!r}) a task_index and no can_id")
+
+    @property
+    def subject(self) -> int | str:
+        """What the problem is numbered by in its scene: its can's id (an int, as trial seeds have
+        always been derived from), or `task<index>` for a free transit."""
+        return self.can_id if self.task_index is None else f"task{self.task_index}"
 
     @property
     def name(self) -> str:
-        return f"can{self.can_id}/{self.kind}"
+        s = self.subject
+        return f"{s if isinstance(s, str) else f'can{s}'}/{self.kind}"
 
     def world_key(self, *, rule: str = CURRENT_RULE) -> tuple:
         """Identifies the collision world of this problem (per-process caches, region cache keys),

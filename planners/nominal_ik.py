@@ -50,7 +50,7 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import PiecewisePose
 
 from planners.drake_queries import EvaluationCounter, query_stats
-from planners.base import PROBLEM_KINDS, Budget, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
+from planners.base import ALL_KINDS, Budget, FailureReason, PlannerBase, PlanningProblem, PlanResult, PlanStatus
 from scenes.errors import SuiteError
 from planners.worlds import drake_plan_scene, remember
 
@@ -179,8 +179,9 @@ def knot_times(waypoint_times: np.ndarray, dt_tu: float) -> np.ndarray:
 
 
 def _problem_seed(problem: PlanningProblem) -> list[int]:
-    """The seed of a problem's retry draws: its `seed` and identity (kind, can)."""
-    return [int(problem.seed) & 0xFFFFFFFF, PROBLEM_KINDS.index(problem.kind), int(problem.can_id) & 0xFFFFFFFF]
+    """The seed of a problem's retry draws: its `seed` and identity (kind, can or free transit's task)."""
+    number = problem.can_id if problem.task_index is None else problem.task_index
+    return [int(problem.seed) & 0xFFFFFFFF, ALL_KINDS.index(problem.kind), int(number) & 0xFFFFFFFF]
 
 
 class NominalIkPlanner(PlannerBase):

@@ -66,9 +66,9 @@ def reseed_ompl(seed: int) -> None:
 
 def trial_seed(problem: PlanningProblem) -> int:
     """The OMPL seed (1 <= seed < 2**32) of a problem: its `seed` combined with its identity
-    (world, kind, can, start and goal configurations). Its bytes are exact, as `trial_id`'s are,
+    (world, kind, can or free transit's task, start and goal configurations). Its bytes are exact, as `trial_id`'s are,
     and the world's are those of the `round9` rule: the seeds every run so far drew."""
-    ident = repr((problem.world_key(rule=LEGACY_RULE), problem.kind, problem.can_id)).encode()
+    ident = repr((problem.world_key(rule=LEGACY_RULE), problem.kind, problem.subject)).encode()
     ident += np.asarray(problem.q_start, float).tobytes()
     ident += b"" if problem.q_goal is None else np.asarray(problem.q_goal, float).tobytes()
     words = np.frombuffer(ident + b"\0" * (-len(ident) % 4), dtype=np.uint32)

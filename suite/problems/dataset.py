@@ -221,7 +221,8 @@ def load_dataset(text: str, *, time_limit_s: float = 5.0) -> Dataset:
         pid = rec.get("problem_id")
         before = removed_before.setdefault(rec["scene_key"], {})
         n_removed = len(rec.get("removed_can_ids") or ())  # the return after a drop counts its own can
-        before[int(rec["can_id"])] = min(before.get(int(rec["can_id"]), n_removed), n_removed)
+        if rec.get("can_id") is not None:  # a cycle's motion (a free transit picks no can)
+            before[int(rec["can_id"])] = min(before.get(int(rec["can_id"]), n_removed), n_removed)
         if not rec.get("benchmark", True):
             steps[(rec["scene_key"], int(rec["can_id"]), rec["kind"])] = (rec["q_start"], rec["q_goal"])
             continue

@@ -75,7 +75,8 @@ class StoredProblem:
     family: str
     scene_seed: int
     kind: str
-    can_id: int
+    #: the can of a cycle's motion; None for a free transit (`planners.base.FREE_TRANSIT`)
+    can_id: int | None
     q_start: Q
     q_goal: Q
     X_WG_goal: Pose
@@ -83,6 +84,9 @@ class StoredProblem:
     held: StoredHeld | None
     gripper_opening_m: float
     removed_can_ids: tuple[int, ...]
+    #: a free transit's number among its scene's tasks; left out of a cycle motion's line (None),
+    #: so those lines, and their record hashes, are as before free transits existed
+    task_index: int | None = None
 
 
 def problem_record(problem: PlanningProblem, meta: dict[str, Any], *, rule: str) -> dict[str, Any]:
@@ -95,8 +99,11 @@ def problem_record(problem: PlanningProblem, meta: dict[str, Any], *, rule: str)
         X_WG_goal=_pose(problem.X_WG_goal),
         waypoints=[StoredWaypoint(w.t, _pose(w.X_WG)) for w in problem.waypoints],
         held=None if problem.held is None else StoredHeld(problem.held.can.id, _pose(problem.held.X_GC)),
-        gripper_opening_m=problem.gripper_opening_m, removed_can_ids=list(problem.removed_can_ids))
+        gripper_opening_m=problem.gripper_opening_m, removed_can_ids=list(problem.removed_can_ids),
+        task_index=problem.task_index)
     rec = {**dataclasses.asdict(stored), **meta}
+    if rec["task_index"] is None:
+        del rec["task_index"]
     rec["record_hash"] = record_hash(rec)
     return rec
 
@@ -124,7 +131,7 @@ def problem_from_record(rec: dict[str, Any], scene: Scene, *, time_limit_s: floa
         X_WG_goal=np.asarray(sp.X_WG_goal, float),
         waypoints=tuple(TaskWaypoint(w.t, np.asarray(w.X_WG, float)) for w in sp.waypoints),
         held=held, gripper_opening_m=sp.gripper_opening_m,
-        removed_can_ids=sp.removed_can_ids, time_limit_s=time_limit_s, seed=seed,
+        removed_can_ids=sp.removed_can_ids, time_limit_s=time_limit_s, seed=seed, task_index=sp.task_index,
     )
 
 

@@ -51,7 +51,7 @@ FIXED_PROPERTIES: dict[str, tuple[str, Any]] = {
     "time": ("REAL", lambda r: metric(r, "planning_time_s")),
     "solved": ("BOOLEAN", lambda r: int(is_success(r))),
     "scene seed": ("INTEGER", lambda r: int(r["scene_seed"])),
-    "can id": ("INTEGER", lambda r: int(r["can_id"])),
+    "can id": ("INTEGER", lambda r: None if r.get("can_id") is None else int(r["can_id"])),  # None: a free transit
 }
 
 
@@ -144,7 +144,8 @@ def benchmark_log(
     exp_props = {
         "trials INTEGER": len(records),
         "scenes INTEGER": len({(r["scene_seed"], r["variant"]) for r in records}),
-        "problems INTEGER": len({(r["scene_seed"], r["variant"], r["can_id"], r["problem"]) for r in records}),
+        "problems INTEGER": len({(r["scene_seed"], r["variant"], r["can_id"], r.get("task_index"), r["problem"])
+                                 for r in records}),
     }
     counts = {p: sum(r["planner"] == p for r in records) for p in planners}
     time_limits = sorted({float(r["time_limit_s"]) for r in records if r.get("time_limit_s") is not None})

@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.patches import Polygon
 
 from suite.report.plots_common import planner_colors, plt, save_figure
-from suite.run.records import is_success, joint_path
+from suite.run.records import is_success, joint_path, problem_number
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +91,8 @@ def plot_gripper_paths(
     scene_recs = [r for r in records if int(r["scene_seed"]) == scene_seed and r["variant"] == variant]
     key = next((r.get("scene_key") for r in scene_recs if r.get("scene_key")), None)
     scene = _recorded_scene(manifest, variant, scene_seed, key,
-                            cans_seen=1 + max((int(r["can_id"]) for r in scene_recs), default=-1))
+                            cans_seen=1 + max((int(r["can_id"]) for r in scene_recs if r.get("can_id") is not None),
+                                              default=-1))
     if scene is None:  # draw the variant's fixed parts at least
         from scenes.spec import load_spec
 
@@ -148,7 +149,7 @@ def _profile_records(records: Sequence[dict], planners: Sequence[str], kind: str
     cands: dict[tuple, dict[str, dict]] = {}
     for r in records:
         if r["problem"] == kind and is_success(r) and joint_path(r) is not None:
-            key = (int(r["scene_seed"]), str(r["variant"]), int(r["can_id"]))
+            key = (int(r["scene_seed"]), str(r["variant"]), problem_number(r))
             cands.setdefault(key, {}).setdefault(r["planner"], r)
     if not cands:
         return None, {}

@@ -153,6 +153,17 @@ def reason_code(rec: dict[str, Any]) -> str | None:
     return STATUS_CAUSE.get(status, FailureReason.NOT_STATED).value
 
 
+def problem_number(rec: dict[str, Any]) -> int:
+    """What a record's problem is numbered by in its scene: its can's id, or a free transit's
+    task index (`task_index`; its `can_id` is None)."""
+    return int(rec["can_id"]) if rec.get("can_id") is not None else int(rec.get("task_index") or 0)
+
+
+def problem_subject(rec: dict[str, Any]) -> str:
+    """`can N` for a cycle's motion, `task N` for a free transit."""
+    return f"can {rec['can_id']}" if rec.get("can_id") is not None else f"task {rec.get('task_index')}"
+
+
 def problem_key(rec: dict[str, Any]) -> tuple:
     """The identity of the planning problem: its content hash (`problem_id`) where the record has
     one, else (scene_seed, variant, can_id, problem kind) as in runs made before problems had one.
@@ -162,7 +173,7 @@ def problem_key(rec: dict[str, Any]) -> tuple:
     pid = rec.get("problem_id")
     if pid:
         return (str(pid),)
-    return (int(rec["scene_seed"]), str(rec["variant"]), int(rec["can_id"]), str(rec["problem"]))
+    return (int(rec["scene_seed"]), str(rec["variant"]), problem_number(rec), str(rec["problem"]))
 
 
 def problem_counts(records: Sequence[dict[str, Any]]) -> dict[str, int]:

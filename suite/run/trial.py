@@ -79,6 +79,8 @@ def trial_id(*, problem: PlanningProblem, planner: str, planner_config: dict) ->
     }
     if problem.budget_clock != "wall":
         fields["budget_clock"] = problem.budget_clock
+    if problem.task_index is not None:  # a free transit, numbered by its task (its "can" is None)
+        fields["task"] = problem.task_index
     blob = json.dumps(fields, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
@@ -104,7 +106,7 @@ def make_trial(problem: PlanningProblem, *, planner: str, planner_config: dict[s
                meta: dict[str, Any] | None = None) -> TrialSpec:
     """The trial of a planner on a problem, its seed derived from the run seed and the problem's
     identity (the one seeding rule of `compare`, `plan` and `execute`)."""
-    p = problem.with_(seed=derive_seed(run_seed, problem.scene.key(), problem.can_id, problem.kind, planner))
+    p = problem.with_(seed=derive_seed(run_seed, problem.scene.key(), problem.subject, problem.kind, planner))
     return TrialSpec(trial_id(problem=p, planner=planner, planner_config=planner_config), planner, planner_config, p,
                      dict(meta or {}))
 
@@ -128,6 +130,7 @@ def trial_record(spec: TrialSpec) -> dict[str, Any]:
         "scene_key": problem.scene.key(),
         "variant": problem.scene.variant,
         "can_id": problem.can_id,
+        **({} if problem.task_index is None else {"task_index": problem.task_index}),
         "problem": problem.kind,
         "held": problem.held is not None,
         "seed": problem.seed,

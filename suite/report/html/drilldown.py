@@ -17,7 +17,7 @@ from typing import Any
 from suite.report.html.markup import esc
 from suite.report.html.problems import Problem
 from suite.report.summary_tables import failure_reason, format_number
-from suite.run.records import SUCCESS, is_success, metric
+from suite.run.records import SUCCESS, is_success, metric, problem_number, problem_subject
 
 #: Where `python -m suite replay` writes a problem's 3-D replay, inside the run directory.
 REPLAYS_DIR = "replays"
@@ -91,7 +91,7 @@ def problem_table(problems: Sequence[Problem], planners: Sequence[str]) -> str:
             f"<td>{esc(p.family)}</td>", f"<td>{esc(p.kind)}</td>",
             f'<td class="num" data-v="{int(f["scene_seed"])}" title="scene key {esc(str(f.get("scene_key")))}">'
             f'{int(f["scene_seed"])}</td>',
-            f'<td class="num">{int(f["can_id"])}</td>',
+            f'<td class="num" title="{esc(problem_subject(f))}">{problem_number(f)}</td>',  # a free transit: its task
             f'<td class="num" data-v="{diff if isinstance(diff, (int, float)) else -1}">'
             f'{format_number(float(diff)) if isinstance(diff, (int, float)) else "-"}</td>',
             f'<td class="num" data-v="{ref if isinstance(ref, (int, float)) else -1}">'
@@ -114,7 +114,7 @@ def _facts(p: Problem) -> str:
     f = p.first
     held = f.get("held")
     parts = [f"scene seed {f['scene_seed']}" + (f" (key {f['scene_key']})" if f.get("scene_key") else ""),
-             f"can {f['can_id']}", "holding the can" if held else ("empty gripper" if held is False else "")]
+             problem_subject(f), "holding the can" if held else ("empty gripper" if held is False else "")]
     if f.get("trivial") is not None:
         parts.append("trivial (its straight segment is valid)" if f["trivial"] else "not trivial")
     if isinstance(f.get("difficulty"), (int, float)):

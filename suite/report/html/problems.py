@@ -22,7 +22,7 @@ import numpy as np
 
 from suite.report.outcomes import family_of
 from suite.report.scene_outlines import SIDE, TOP, can_outline, scene_outlines
-from suite.run.records import PROBLEM_KINDS, joint_path, problem_key
+from suite.run.records import PROBLEM_KINDS, joint_path, problem_key, problem_number
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +76,7 @@ def group_problems(records: Sequence[dict[str, Any]]) -> list[Problem]:
 
     def order(key):
         r = firsts[key]
-        return (family_of(r), int(r["scene_seed"]), str(r.get("scene_key") or ""), int(r["can_id"]),
+        return (family_of(r), int(r["scene_seed"]), str(r.get("scene_key") or ""), problem_number(r),
                 kind_rank.get(str(r["problem"]), len(kind_rank)), problem_label(key))
 
     out = []
@@ -182,7 +182,8 @@ def load_world(problems: Sequence[Problem], manifest: dict[str, Any]) -> World:
         if key in scenes or key is None:
             continue
         scene = _recorded_scene(manifest, str(p.first["variant"]), int(p.first["scene_seed"]), key,
-                                cans_seen=1 + max(int(q.first["can_id"]) for q in problems))
+                                cans_seen=1 + max((int(q.first["can_id"]) for q in problems
+                                                   if q.first.get("can_id") is not None), default=-1))
         if scene is not None:
             scenes[key] = scene
     wanted = {p.first.get("scene_key") for p in problems}
