@@ -8,8 +8,9 @@ docs/gcs-paper.md).
 - `run` (the default): the offline work (regions, roadmap; built once into the dataset's
   directory, then loaded), the GCS relaxation and optimum per task, `--runs` comparison runs, and
   the table beside the paper's findings (OUT/table.md, OUT/paper.json, OUT/paths.png).
-- `dataset`: rebuild scenes/datasets/gcs-arm (the ten problems: the five tasks and their
-  reverses, with certified best known paths).
+- `dataset`: build scenes/datasets/gcs-arm-v2 (the ten problems: the five tasks and their
+  reverses as free transits, with certified best known paths; `gcs-arm`, the first revision,
+  stays as it was built).
 - `convert-regions`: convert the paper's own regions (its repository's
   data/prm_comparison/IRIS.reg, a pickle, and its LICENSE.TXT) once into plain arrays in
   scenes/datasets/gcs-arm/paper-regions/ (`suite.paper.paper_regions`).

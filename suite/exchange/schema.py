@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from planners.base import ALL_KINDS
+
 #: Version of the export's files (problems.jsonl, results lines); bumped on any incompatible change.
 FORMAT_VERSION = 1
 
@@ -55,8 +57,9 @@ PROBLEM_SCHEMA: dict[str, Any] = {
                        "description": "content hash of the problem; send it back with your result"},
         "dataset": {**_STR, "description": "dataset NAME:TIER the problem was exported from"},
         "family": {**_STR, "description": "the scene family (open, wall, station, shelf, window, clutter)"},
-        "kind": {"enum": ["approach", "descend", "lift", "transit", "return"],
-                 "description": "the motion of the pick-and-place cycle"},
+        "kind": {"enum": list(ALL_KINDS),
+                 "description": "the motion of the pick-and-place cycle, or 'free': a free transit between two "
+                                "configurations that belongs to no can's cycle (the GCS paper's tasks)"},
         "scene_key": {**_STR, "description": "the scene the problem comes from (problems share scenes)"},
         "q_start": {**_Q, "description": "start configuration, rad (iiwa_joint_1..7)"},
         "q_goal": {**_Q, "description": "goal configuration, rad: the path must end here"},

@@ -1,4 +1,4 @@
-"""The GCS paper's arm experiment: its scene, its five tasks, and the `gcs-arm` dataset.
+"""The GCS paper's arm experiment: its scene, its five tasks, and the `gcs-arm-v2` dataset.
 
 Marcucci, Petersen, von Wrangel and Tedrake, "Motion planning around obstacles with convex
 optimization" (Science Robotics 2023; arXiv 2205.04422), section "GCS vs PRM": a KUKA iiwa 14
@@ -7,13 +7,17 @@ below comes from the paper's repository, RobotLocomotion/gcs-science-robotics at
 `reproduction/prm_comparison/` (docs/gcs-paper-sources.md, section 7, gives each one's file).
 
 - The scene is the spec variant `gcs-arm` (scenes/specs/default.yaml) with the robot variant
-  `iiwa14-spheres`; its 8 hand-placed region seeds are the scene's own (`region_seeds`).
+  `iiwa14-spheres`; its 8 hand-placed region seeds are the scene's own (`region_seeds`). It is no
+  can station: shelves and two bins as obstacles, no plate, bin, cans or waypoints.
 - The tasks' end configurations are the paper's IK recipe (`scenes.ik.paper_ik`) at the
   demonstration poses (`TASK_POSES`), from the same q0 as the seeds.
-- The dataset holds the five tasks and their reverses, as free-space motions (`transit`, nothing
-  held), each with the straight gripper-pose interpolation between its ends as the task
-  waypoints the nominal-IK planner follows, and with a certified best known path from the
-  suite's offline search (`suite.run.best_known.search_job`).
+- The dataset holds the five tasks and their reverses, as free transits (kind `free`, nothing
+  held, numbered by their `task_index` 0-9), each with the straight gripper-pose interpolation
+  between its ends as the task waypoints the nominal-IK planner follows, and with a certified
+  best known path from the suite's offline search (`suite.run.best_known.search_job`).
+- `gcs-arm`, the dataset's first revision, holds the same tasks in the same free space, posed as
+  `transit`s numbered as cans 0-9 in the scene with a stand-in plate buried in the table (when a
+  spec needed one); its specs and ids are stored with it and do not move.
 """
 
 from __future__ import annotations
@@ -32,7 +36,8 @@ from scenes.errors import SuiteError
 #: The scene's variant and its one seed (the scene has no random part: no cans).
 VARIANT = "gcs-arm"
 SCENE_SEED = 0
-DATASET = "gcs-arm"
+#: The dataset `paper gcs-arm dataset` builds from this scene (the first revision: `gcs-arm`).
+DATASET = "gcs-arm-v2"
 _SHELF_RPY = (0.0, -math.pi, -math.pi / 2)
 #: The demonstration poses (gripper body frame in the world: position m, roll-pitch-yaw rad):
 #: the seeds' orientations at shifted positions (the notebook's task poses).
@@ -52,7 +57,7 @@ TASK_SPAN_TU = (18.0, 30.0)
 
 
 def paper_scene():
-    """The `gcs-arm` scene (a concrete station, no cans)."""
+    """The `gcs-arm` scene (a concrete world: no can station, no random part)."""
     from scenes.generate import generate_scene
     from scenes.spec import load_spec
 
@@ -89,11 +94,10 @@ def task_label(a: str, b: str) -> str:
 
 
 def task_problems(scene=None, *, time_limit_s: float = 5.0, reverses: bool = True) -> list[tuple[str, Any]]:
-    """(label, PlanningProblem) for the five tasks (then their reverses): free-space transits
-    between the IK configurations, with the straight gripper-pose interpolation between the two
-    poses as their task waypoints. No can is picked: `can_id` numbers the task (0-9), since a
-    trial is identified by its scene, can and kind."""
-    from planners.base import PlanningProblem, TaskWaypoint
+    """(label, PlanningProblem) for the five tasks (then their reverses): free transits between
+    the IK configurations, with the straight gripper-pose interpolation between the two poses as
+    their task waypoints, numbered by their `task_index` (0-9; no can is picked)."""
+    from planners.base import FREE_TRANSIT, PlanningProblem, TaskWaypoint
     from scenes.robot_model import load_robot
 
     scene = scene or paper_scene()
@@ -104,7 +108,8 @@ def task_problems(scene=None, *, time_limit_s: float = 5.0, reverses: bool = Tru
     for k, (a, b) in enumerate(pairs):
         X_a, X_b = robot.gripper_pose(q[a]), robot.gripper_pose(q[b])
         out.append((task_label(a, b), PlanningProblem(
-            kind="transit", scene=scene, can_id=k, q_start=q[a].copy(), q_goal=q[b].copy(), X_WG_goal=X_b,
+            kind=FREE_TRANSIT, scene=scene, can_id=None, task_index=k, q_start=q[a].copy(), q_goal=q[b].copy(),
+            X_WG_goal=X_b,
             waypoints=(TaskWaypoint(TASK_SPAN_TU[0], X_a), TaskWaypoint(TASK_SPAN_TU[1], X_b)),
             held=None, gripper_opening_m=scene.spec.grasp.open_width_m, removed_can_ids=(),
             time_limit_s=time_limit_s, seed=0)))
@@ -184,6 +189,9 @@ def build_dataset(*, name: str = DATASET, search_s: float = 20.0, rrt_starts: in
         "hash": dataset_hash(scene_lines, records),
         "identity_rule": CURRENT_RULE,
         "source": "the GCS paper's arm experiment (suite/paper/gcs_arm.py, docs/gcs-paper.md)",
+        "previous_revision": {"name": "gcs-arm", "change": "the same tasks in the same free space, posed as free "
+                              "transits numbered by task in the scene without the stand-in plate (its left bin "
+                              "as the file's five boxes): a new scene key and new problem ids"},
         "counts": {"scenes": 1, "problems": len(records), "trivial": sum(r["trivial"] for r in records)},
         "references_certified": True,
         "witness_clearance_m": clearance_summary([r["witness"]["clearance_min_m"] for r in records

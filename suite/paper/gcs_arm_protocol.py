@@ -229,7 +229,7 @@ def run_protocol(out: Path, *, dataset: str = "gcs-arm", runs: int = 10, time_li
     table = {task_label(a, b): table[task_label(a, b)] for a, b in TASKS if task_label(a, b) in table}
     facts = findings(table, optimality, off)
     runs_all = [(d, {}) for d in run_dirs] + [(d, {"gcs": GCS_PAPER}) for d in paper_dirs]
-    ours_model = verdicts_with_our_robot(runs_all, labels)
+    ours_model = verdicts_with_our_robot(runs_all, labels, dataset=dataset)
     report = {"dataset": dataset, "runs": runs, "time_limit_s": time_limit_s, "region_sets": list(regions),
               "offline": off, "gcs_optimality": optimality, "regions": region_rows, "table": table,
               "findings": facts, "paper": PAPER, "gcs_settings": PAPER_GCS, "paper_iris": PAPER_IRIS,
@@ -244,24 +244,23 @@ def run_protocol(out: Path, *, dataset: str = "gcs-arm", runs: int = 10, time_li
     return report
 
 
-def verdicts_with_our_robot(runs: list[tuple[Path, dict[str, str]]], labels: dict[str, str]) -> dict[str, dict[str, int]]:
+def verdicts_with_our_robot(runs: list[tuple[Path, dict[str, str]]], labels: dict[str, str], *,
+                            dataset: str = "gcs-arm") -> dict[str, dict[str, int]]:
     """Every success of the runs ((run directory, planner renames) pairs) judged again with the
     project's own robot model (`iiwa14-wsg`: capsules, the WSG's fingers open) in the same scene:
     per planner, successes and how many of them that validator still passes. The paper's model is
-    the scene's own; this says how much the verdicts depend on it."""
+    the scene's own; this says how much the verdicts depend on it. The problems are `dataset`'s."""
     import dataclasses
 
     from planners.worlds import collision_world
     from scenes.robot_model import DEFAULT_ROBOT
-    from suite.paper.gcs_arm import paper_scene
     from suite.problems.dataset import load_dataset
     from suite.run.records import read_trials
     from suite.scoring.validate import validate_path
 
-    scene = paper_scene()
-    ours = dataclasses.replace(scene, spec=dataclasses.replace(scene.spec, robot=DEFAULT_ROBOT))
-    ds = load_dataset("gcs-arm:tasks")
-    problems = {pid: p.with_(scene=ours) for pid, p in zip(ds.ids, ds.problems)}
+    ds = load_dataset(f"{dataset}:tasks")
+    problems = {pid: p.with_(scene=dataclasses.replace(p.scene, spec=dataclasses.replace(p.scene.spec, robot=DEFAULT_ROBOT)))
+                for pid, p in zip(ds.ids, ds.problems)}
     out: dict[str, dict[str, int]] = {}
     for d, rename in runs:
         for r in read_trials(d):

@@ -293,9 +293,8 @@ def plot_paths(runs: list[tuple[Path, dict[str, str]]], labels: dict[str, str], 
     recs = [{**r, "planner": rename.get(r["planner"], r["planner"])} for d, rename in runs for r in read_trials(d)]
     fig, axes = plt.subplots(1, 2, figsize=(13, 6.6))
     for ax, dims in zip(axes, ((0, 1), (1, 2))):
-        for o in scene_outlines(scene.spec, (), dims=dims):
-            if o.kind != "plate":  # the spec's plate is buried in the table: no geometry of its own
-                ax.add_patch(Polygon(o.xy_m, closed=True, **OUTLINE_STYLES[o.kind]))
+        for o in scene_outlines(scene.spec, (), dims=dims):  # the world has no plate (no can station)
+            ax.add_patch(Polygon(o.xy_m, closed=True, **OUTLINE_STYLES[o.kind]))
     colors = plt.get_cmap("tab10")
     styles = dict(zip(planners, ("-", ":", "--")))
     for k, (a, b) in enumerate(TASKS):
