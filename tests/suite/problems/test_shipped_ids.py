@@ -33,8 +33,8 @@ def _lines(path):
 
 
 def test_the_shipped_datasets_are_found():
-    assert {"recycle-v1", "recycle-v2", "recycle-v3", "recycle-v3.1", "gcs-arm"} <= set(SHIPPED)
-    assert {"gcs-arm"} <= set(SMALL)
+    assert {"recycle-v1", "recycle-v2", "recycle-v3", "recycle-v3.1", "gcs-arm", "gcs-arm-v2"} <= set(SHIPPED)
+    assert {"gcs-arm", "gcs-arm-v2"} <= set(SMALL)
 
 
 @pytest.mark.parametrize("name", SHIPPED)
