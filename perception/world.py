@@ -50,7 +50,8 @@ from perception.voxel_boxes import clear_of_cans, merge_boxes
 from perception.world_evidence import depth_sigmas, fill_row_holes, inside, robot_explains
 from scenes.errors import SuiteError
 from scenes.scene import CanPose, HeldCan, Scene
-from scenes.spec import Obstacle, SceneSpec, pose_tuple
+from scenes.spec import SceneSpec
+from scenes.spec_parts import Obstacle, pose_tuple
 
 #: name prefixes of the objects a scene generator scatters on the plate (not known to the robot)
 LOOSE_PREFIXES = ("distractor_", "hourglass_", "dented_")

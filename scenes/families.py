@@ -30,7 +30,8 @@ import numpy as np
 
 from scenes.errors import SuiteError
 from scenes.family_ranges import ClutterRanges, LookalikeRanges, Range, ShelfRanges, StationRanges, WindowRanges
-from scenes.spec import CameraPose, Obstacle, SceneSpec, pose_tuple
+from scenes.spec import SceneSpec
+from scenes.spec_parts import CameraPose, Obstacle, pose_tuple
 
 #: Height of the waypoint above the plate over the plate's top face, and above the bin's rim.
 ABOVE_PLATE_M = 0.36

@@ -26,7 +26,8 @@ import math
 import numpy as np
 
 from scenes.errors import SuiteError
-from scenes.spec import Obstacle, SceneSpec, pose_tuple
+from scenes.spec import SceneSpec
+from scenes.spec_parts import Obstacle, pose_tuple
 
 HOURGLASS_PREFIX = "hourglass_"
 DENTED_PREFIX = "dented_"

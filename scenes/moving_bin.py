@@ -193,7 +193,7 @@ def person_offset_m(scenario: MovingBinScenario, spec: SceneSpec) -> np.ndarray:
 
 def person_obstacle(scenario: MovingBinScenario, spec: SceneSpec, bin_xy_m) -> Obstacle:
     """The person as a static cylinder for a planning world with the bin centre at bin_xy_m."""
-    from scenes.spec import Obstacle, pose_tuple
+    from scenes.spec_parts import Obstacle, pose_tuple
 
     X = np.eye(4)
     X[:2, 3] = np.asarray(bin_xy_m, float) + person_offset_m(scenario, spec)

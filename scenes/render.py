@@ -92,7 +92,7 @@ def render_overview(scene: Scene, *, q_iiwa: np.ndarray | None = None, width_px:
     Returns:
         The colour image (H, W, 3) uint8.
     """
-    from scenes.spec import CameraPose
+    from scenes.spec_parts import CameraPose
 
     spec = scene.spec
     pts = np.array([[0.0, 0.0], *spec.work_xy_m()], float)

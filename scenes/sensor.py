@@ -1,6 +1,6 @@
 """Depth-camera sensor models: what a real RGB-D camera does to the rendered (perfect) frame.
 
-A camera's `sensor` (`scenes.spec.CameraSpec.sensor`, off by default) names one of two models:
+A camera's `sensor` (`scenes.spec_parts.CameraSpec.sensor`, off by default) names one of two models:
 
 - `gaussian`: additive Gaussian depth noise of one sigma everywhere, and a fraction of pixels
   dropped at random (the suite's first, simple option; kept for comparison).

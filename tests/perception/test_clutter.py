@@ -16,7 +16,8 @@ from perception.pipeline import perceive
 from scenes.generate import generate_scene
 from scenes.grasp_rule import make_grasp
 from scenes.scene import CanPose, Scene
-from scenes.spec import Obstacle, load_spec, pose_tuple
+from scenes.spec import load_spec
+from scenes.spec_parts import Obstacle, pose_tuple
 
 SPEC = load_spec(variant="open")
 R, H = SPEC.can.radius_m, SPEC.can.height_m

@@ -16,7 +16,8 @@ from perception.world_evidence import fill_row_holes, inside
 from scenes.errors import SuiteError
 from scenes.generate import generate_scene
 from scenes.scene import CanPose, Scene
-from scenes.spec import Obstacle, load_spec, pose_tuple
+from scenes.spec import load_spec
+from scenes.spec_parts import Obstacle, pose_tuple
 
 ROBUST_KINECT = PerceptionSetup(pipeline="robust", sensor="kinect-v1")
 
