@@ -58,14 +58,15 @@ def plan_open_loop(scene: Scene, grasps, seen, job: ExecutionJob, induced: list,
         problems = build_problems(scene, todo, time_limit_s=job.time_limit_s, seed=job.seed, world=seen,
                                   removed=removed, seen_removed=seen_removed)
         q_home = problems[0].q_start if q_home is None else q_home
-        planned = plan_cans(problems, job, induced, planning_s)
-        for n, (can_id, paths, failed) in enumerate(planned):
+        k = len(PROBLEM_KINDS)
+        for n in range(len(problems) // k):  # can by can: nothing after a failure is planned (and counted) twice
+            (can_id, paths, failed), = plan_cans(problems[n * k:(n + 1) * k], job, induced, planning_s)
             out.append((can_id, paths, failed))
             last = len(out) == len(grasps)
             if (failed or any(p is None for p in paths)) and not (last and _only_return_missing(paths)):
                 todo = todo[n + 1:] if job.on_failure == "skip" else []
                 break
-            transit = problems[n * len(PROBLEM_KINDS) + PROBLEM_KINDS.index("transit")]
+            transit = problems[n * k + PROBLEM_KINDS.index("transit")]
             removed = transit.removed_can_ids
             seen_removed = () if transit.plan_world is None else transit.plan_world.removed_can_ids
         else:

@@ -261,3 +261,30 @@ def test_an_unknown_failure_policy_is_refused():
     scene = generate_scene(load_spec(variant="open").with_can_count(1), seed=1)
     with pytest.raises(SuiteError, match="on-failure policy 'retry'; allowed: skip, stop"):
         ExecutionJob("rrt", {}, scene, "truth", 5.0, 1, on_failure="retry")
+
+
+def test_a_skip_plans_and_counts_each_can_once(monkeypatch):
+    """After a failure the later cans are planned once, in the rebuilt problems only: every planning
+    time (and perception-induced record) belongs to a problem tried once."""
+    import suite.execution.plan_loop as loop
+    from suite.execution.plan_loop import plan_open_loop
+
+    scene = generate_scene(load_spec(variant="open").with_can_count(2), seed=11)
+    first, second = (truth_grasp(scene, c) for c in scene.cans)
+    far = first.X_WG.copy()
+    far[:3, 3] += [2.0, 0.0, 0.0]
+    bad = type(first)(99, far, far, False)
+    planned_kinds = []
+    real = loop.plan_cans
+
+    def counting(problems, job, induced=None, planning_s=None):
+        planned_kinds.extend((p.can_id, p.kind) for p in problems)
+        return real(problems, job, induced, planning_s)
+
+    monkeypatch.setattr(loop, "plan_cans", counting)
+    job = ExecutionJob("rrt", config_dict(make_config(planner_class("rrt"), None)), scene, "truth", 5.0, scene.seed)
+    times: list[float] = []
+    planned, _ = plan_open_loop(scene, [first, bad, second], None, job, [], times)
+    assert len(planned) == 3
+    assert len(planned_kinds) == len(set(planned_kinds)) == 15  # each can's five problems, once
+    assert len(times) == len(planned_kinds)  # one planning time per problem tried
