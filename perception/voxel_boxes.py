@@ -7,8 +7,9 @@ reaches past what it holds by up to a voxel (an unseen cube beside the can, or t
 box bounded by points on two sides), and at the lift's start the can in the gripper would strike
 it although nothing but the can is there. `clear_of_cans` moves one face of every such box back
 to the held model's surface: the face that loses the least volume; a box with no such face left
-is dropped. Only space within the held margin of a perceived can is given up, which the judge's
-own held margin forbids to anything else anyway.
+is dropped. The space given up reaches past the held margin by the goal IK's tolerance, and it is
+given up round every perceived can, not only the one lifted: an object standing within it (5-8 mm
+from a can, which the judge's margin on the held can alone allows) is erased from the world.
 """
 
 from __future__ import annotations

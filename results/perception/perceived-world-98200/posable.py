@@ -17,7 +17,7 @@ for seed in range(int(sys.argv[1]), int(sys.argv[2])):
     for world in ("truth", "perceived"):
         gp, seen = scene_task(scene, grasps="perceived", perception=setup, world=world)
         ok = 0
-        for i in range(len(gp)):  # each can alone after the ones before it (as if they were recycled)
+        for i in range(len(gp)):  # each can alone, with every other can in place
             probs = build_problems(scene, gp[i:i + 1], time_limit_s=5, seed=0, world=seen,
                                    **({} if len(sys.argv) < 4 else {}))
             good = True
