@@ -123,8 +123,9 @@ def can_pose_from(can_id: int, X_WC: np.ndarray) -> CanPose:
 def closed_loop(job: ExecutionJob, induced: list, worlds: list, planning_s: list):
     """Between cycles: look again, rebuild the scene from where the cans now are, plan the next
     can, and hand its cycle to the simulation. In a perceived world, the world is rebuilt from
-    every camera's fresh frame (the arm, at its pose when they were taken, left out); the truth of
-    where the cans are serves the judge only. Perception-induced failures go to `induced`, each
+    every camera's fresh frame (the arm, at its pose when they were taken, left out). With perceived
+    grasps the truth of where the cans are builds the judge's scene only; the loop ends when the
+    cameras see no can where none was tried. Perception-induced failures go to `induced`, each
     world's summary to `worlds`."""
     from perception.pipeline import GRASP_CAMERA, PerceptionSetup, detect_cans, detect_in_frames, noise_rng
     from perception.side_view import SIDE_CAMERAS
@@ -138,12 +139,14 @@ def closed_loop(job: ExecutionJob, induced: list, worlds: list, planning_s: list
     perceived_world = plan_world_for(job.grasps, job.world) == "perceived"
 
     skipped: list[str] = []  # cans left on the plate after a failure (`on_failure="skip"`)
-    failed_xy: list[np.ndarray] = []  # where their grasps were (a detection there is not tried again)
+    tried_xy: list[np.ndarray] = []  # where grasps were tried (perceived: a detection there is not tried again)
 
     def provide(world: WorldState):
+        # The truth of where the cans are builds the judge's scene; with perceived grasps nothing else
+        # reads it: what is left to try, and when to stop, are what the cameras see.
         on_plate = [can_pose_from(i, X) for i, X in sorted(world.X_WCans.items()) if where(spec, X[:3, 3]) == "plate"]
         cans = [c for c in on_plate if c.id not in tried]
-        if not cans:
+        if job.grasps == "truth" and not cans:
             return None, _ended(skipped, "")
         now = Scene(spec, job.scene.seed, tuple(on_plate))  # a can tried and left there is in the way
         seen = None
@@ -171,17 +174,17 @@ def closed_loop(job: ExecutionJob, induced: list, worlds: list, planning_s: list
                 rng = noise_rng(job.scene.seed, *([len(tried)] if tried else []))
                 detections = detect_in_frames(images, spec, setup=setup, rng=rng)
             grasps = [d.grasp for d in detections]
-        # a grasp where one already failed is not tried again (the robot knows where it failed)
+        # a grasp where one was already tried is not tried again (the robot knows where it reached)
         r = spec.can.radius_m
-        grasps = [g for g in grasps if all(np.hypot(*(g.X_WG[:2, 3] - p)) > r for p in failed_xy)]
+        grasps = [g for g in grasps if all(np.hypot(*(g.X_WG[:2, 3] - p)) > r for p in tried_xy)]
         if not grasps:
-            return None, _ended(skipped, f"{len(cans)} can(s) left on the plate, none detected"
-                                if job.grasps == "perceived" else "")
+            return None, _ended(skipped, "")  # as far as the robot knows, the plate is cleared
         for grasp in grasps:
             problems = build_problems(now, [grasp], time_limit_s=job.time_limit_s, seed=job.seed,
                                       q_home=world.q_command, world=seen)
             (can_id, paths, failed), = plan_cans(problems, job, induced, planning_s)
             tried.add(can_id)
+            tried_xy.append(grasp.X_WG[:2, 3].copy())
             cycle = None if failed else timed_cycle(can_id, paths)
             if cycle is not None:
                 return cycle, ""
@@ -189,7 +192,6 @@ def closed_loop(job: ExecutionJob, induced: list, worlds: list, planning_s: list
             if job.on_failure == "stop":
                 return None, reason
             skipped.append(reason)
-            failed_xy.append(grasp.X_WG[:2, 3].copy())
         return None, _ended(skipped, "")
 
     return provide

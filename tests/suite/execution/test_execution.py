@@ -130,7 +130,9 @@ def test_reperceive_picks_a_moved_can_from_where_it_really_is():
     assert closed["cans_in_bin"] == 2, closed
     # planned in the world the cameras saw, rebuilt after the pick; judged and simulated in the truth
     assert closed["worlds"] == {"planned": "perceived", "judged": "truth", "physics": "truth"}
-    assert [w["cans"] for w in closed["perceived_worlds"]] == [2, 1]
+    # the loop ends on what the cameras see: a last look finds the plate empty
+    assert [w["cans"] for w in closed["perceived_worlds"]] == [2, 1, 0]
+    assert closed["stopped"] == ""
     assert closed["perception_induced"] == []
 
 
