@@ -9,26 +9,16 @@ import importlib.util
 import re
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[3]
-#: Where modules are named: the packages, the tests, the adapters and the readers' pages.
-SOURCES = ("suite", "planners", "perception", "scenes", "tests", "adapters")
+from layout_scan import ROOT, repo_texts
+
 NAMED = re.compile(r"(?<!tests/)planners[./]gcs[./](\w+)")
 OLD = re.compile("planners[./]" + "gcs_" + r"(cover|regions|sets|solve)|planners\.gcs" + r"(:| import Gcs)"
                  + "|planners/" + r"gcs\.py|tests/planners/test_" + "gcs")
 
 
-def _texts():
-    files = [*ROOT.glob("docs/*.md"), ROOT / "README.md"]
-    for top in SOURCES:
-        files += (ROOT / top).rglob("*.py")
-    for f in files:
-        if f.is_file():
-            yield f.relative_to(ROOT), f.read_text(encoding="utf-8")
-
-
 def test_every_named_gcs_module_resolves_and_no_old_name_is_left():
     missing, old, named = [], [], set()
-    for rel, text in _texts():
+    for rel, text in repo_texts():
         for m in NAMED.finditer(text):
             named.add(m.group(1))
             if importlib.util.find_spec(f"planners.gcs.{m.group(1)}") is None:
