@@ -6,6 +6,7 @@ runner appended for one finished trial; the runner owns writing them, this modul
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import math
@@ -36,11 +37,108 @@ PROBLEM_KINDS: tuple[str, ...] = ("approach", "descend", "lift", "transit", "ret
 #: Fields a line must have to count as a trial record.
 REQUIRED_FIELDS = ("planner", "status", "problem", "scene_seed", "variant", "can_id")
 
+
+@dataclasses.dataclass(eq=False)
+class TrialRecord:
+    """One trial's record: one line of `trials.jsonl`, as the runner (`suite.run.trial`) writes it.
+
+    The fields are in the order the runner writes them. A field a line does not have keeps its
+    default (None, or empty); a key this version does not name is kept in `extra`, so a record read
+    and written back (`to_json`) is the line it was, key order included.
+    """
+
+    planner: str
+    status: str
+    #: the motion's kind (`planners.base.PROBLEM_KINDS`, or `free` for a free transit)
+    problem: str
+    scene_seed: int
+    variant: str
+    #: the can the motion belongs to; None for a free transit (numbered by `task_index`)
+    can_id: int | None
+    format_version: int | None = None
+    trial_id: str | None = None
+    planner_config: dict[str, Any] = dataclasses.field(default_factory=dict)
+    scene_key: str | None = None
+    task_index: int | None = None
+    held: bool | None = None
+    seed: int | None = None
+    time_limit_s: float | None = None
+    budget_clock: str | None = None
+    q_start: list[float] | None = None
+    q_goal: list[float] | None = None
+    # what the run knows of the problem (`TrialSpec.meta`)
+    problem_id: str | None = None
+    family: str | None = None
+    kind: str | None = None
+    trivial: bool | None = None
+    difficulty: float | None = None
+    straight_length_rad: float | None = None
+    split: str | None = None
+    reference_length_rad: float | None = None
+    reference_ee_length_m: float | None = None
+    budget_s: float | None = None
+    # how it ran
+    setup_time_s: float | None = None
+    contention: dict[str, Any] | None = None
+    checker: str | None = None
+    fcl_collide_calls: int | None = None
+    #: False: the worker's first trial of this planner (its imports and first solve paid here)
+    warm: bool | None = None
+    external: bool | None = None
+    # the verdict
+    planning_time_s: float | None = None
+    planning_cpu_time_s: float | None = None
+    path: list[list[float]] | None = None
+    metrics: dict[str, Any] = dataclasses.field(default_factory=dict)
+    certification: dict[str, Any] | None = None
+    stats: dict[str, Any] = dataclasses.field(default_factory=dict)
+    reason_code: str | None = None
+    attribution: dict[str, Any] | None = None
+    worlds: dict[str, Any] | None = None
+    #: keys of the line this version does not name (kept for the round trip)
+    extra: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
+    #: the line's keys in its order (empty for a record made in memory)
+    keys: tuple[str, ...] = dataclasses.field(default=(), repr=False)
+
+    @classmethod
+    def from_json(cls, obj: dict[str, Any]) -> TrialRecord:
+        """A record from one parsed line (its REQUIRED_FIELDS present; the caller checks them)."""
+        named = {k: v for k, v in obj.items() if k in _RECORD_FIELDS}
+        return cls(**named, extra={k: v for k, v in obj.items() if k not in _RECORD_FIELDS}, keys=tuple(obj))
+
+    def to_json(self) -> dict[str, Any]:
+        """The line's JSON object: the keys it was read with, in their order, then any field set since."""
+        out: dict[str, Any] = {}
+        for key in self.keys:
+            out[key] = getattr(self, key) if key in _RECORD_FIELDS else self.extra[key]
+        for f in _FIELDS_WRITTEN:
+            if f.name in out:
+                continue
+            value = getattr(self, f.name)
+            if f.name in REQUIRED_FIELDS or value != (f.default_factory() if f.default_factory is not
+                                                      dataclasses.MISSING else f.default):
+                out[f.name] = value
+        out.update((k, v) for k, v in self.extra.items() if k not in out)
+        return out
+
+    def with_(self, **changes: Any) -> TrialRecord:
+        """A copy with some fields changed (the stats and metrics dicts copied, not shared)."""
+        return dataclasses.replace(self, **{"stats": dict(self.stats), "metrics": dict(self.metrics), **changes})
+
+    @property
+    def succeeded(self) -> bool:
+        """True if the trial produced a validated, timed path."""
+        return self.status == SUCCESS
+
+
+_FIELDS_WRITTEN = tuple(f for f in dataclasses.fields(TrialRecord) if f.name not in ("extra", "keys"))
+_RECORD_FIELDS = frozenset(f.name for f in _FIELDS_WRITTEN)
+
 #: Metrics that are fields of the record itself rather than of its "metrics" dict.
 TOP_LEVEL_METRICS = ("planning_time_s",)
 
 
-def read_trials(path: str | Path) -> list[dict[str, Any]]:
+def read_trials(path: str | Path) -> list[TrialRecord]:
     """Read every trial record of a `trials.jsonl` file.
 
     A final line that is not valid JSON is a record torn by an interrupted write: it is skipped
@@ -81,7 +179,7 @@ def read_trials(path: str | Path) -> list[dict[str, Any]]:
         if missing:
             raise SuiteError(f"{path} line {i + 1} lacks the field(s) {', '.join(missing)}")
         check_version(rec, supported=RECORD_FORMAT_VERSION, what="trial record", where=f"{path} line {i + 1}")
-        records.append(rec)
+        records.append(TrialRecord.from_json(rec))
     return records
 
 
@@ -101,9 +199,9 @@ def read_manifest(run_dir: str | Path) -> dict[str, Any]:
 # --- typed access ---------------------------------------------------------------------------------
 
 
-def is_success(rec: dict[str, Any]) -> bool:
+def is_success(rec: TrialRecord) -> bool:
     """True if the trial produced a validated, timed path."""
-    return rec.get("status") == SUCCESS
+    return rec.succeeded
 
 
 #: The free-text reasons the suite's planners wrote before they named a cause, and that cause.
@@ -122,20 +220,19 @@ _JUDGED = (PlanStatus.INVALID_SOLUTION, PlanStatus.TIMING_FAILED, PlanStatus.CRA
 _SAMPLERS = ("RRTConnect", "RRTstar", "BITstar", "AORRTC", "PRM", "roboplan RRT-Connect")
 
 
-def reason_code(rec: dict[str, Any]) -> str | None:
+def reason_code(rec: TrialRecord) -> str | None:
     """A failed record's enumerated cause (`planners.base.FailureReason`'s value), None for a
     success. Read from the record (`reason_code`), else worked out as the judge works it out,
     so old records and imported ones get one too (`not_stated` where nothing says)."""
     if is_success(rec):
         return None
-    given = rec.get("reason_code")
-    if given:
-        return str(given)
+    if rec.reason_code:
+        return str(rec.reason_code)
     try:
-        status = PlanStatus(rec.get("status"))
+        status = PlanStatus(rec.status)
     except ValueError:
         status = None
-    stats = rec.get("stats") or {}
+    stats = rec.stats or {}
     if stats.get("reason") in (FailureReason.PATH_OVER_LIMIT.value, FailureReason.OUT_OF_MEMORY.value):
         return str(stats["reason"])
     if status is PlanStatus.TIMEOUT and "late_by_s" in stats:
@@ -153,41 +250,40 @@ def reason_code(rec: dict[str, Any]) -> str | None:
     return STATUS_CAUSE.get(status, FailureReason.NOT_STATED).value
 
 
-def problem_number(rec: dict[str, Any]) -> int:
+def problem_number(rec: TrialRecord) -> int:
     """What a record's problem is numbered by in its scene: its can's id, or a free transit's
     task index (`task_index`; its `can_id` is None)."""
-    return int(rec["can_id"]) if rec.get("can_id") is not None else int(rec.get("task_index") or 0)
+    return int(rec.can_id) if rec.can_id is not None else int(rec.task_index or 0)
 
 
-def problem_subject(rec: dict[str, Any]) -> str:
+def problem_subject(rec: TrialRecord) -> str:
     """`can N` for a cycle's motion, `task N` for a free transit."""
-    return f"can {rec['can_id']}" if rec.get("can_id") is not None else f"task {rec.get('task_index')}"
+    return f"can {rec.can_id}" if rec.can_id is not None else f"task {rec.task_index}"
 
 
-def problem_key(rec: dict[str, Any]) -> tuple:
+def problem_key(rec: TrialRecord) -> tuple:
     """The identity of the planning problem: its content hash (`problem_id`) where the record has
     one, else (scene_seed, variant, can_id, problem kind) as in runs made before problems had one.
 
     Every planner of a comparison solves the same problems, so records pair on this key.
     """
-    pid = rec.get("problem_id")
-    if pid:
-        return (str(pid),)
-    return (int(rec["scene_seed"]), str(rec["variant"]), problem_number(rec), str(rec["problem"]))
+    if rec.problem_id:
+        return (str(rec.problem_id),)
+    return (int(rec.scene_seed), str(rec.variant), problem_number(rec), str(rec.problem))
 
 
-def problem_counts(records: Sequence[dict[str, Any]]) -> dict[str, int]:
+def problem_counts(records: Sequence[TrialRecord]) -> dict[str, int]:
     """How many distinct problems the records hold, how many of them are trivial (their straight
     segment passes the validator) and how many scenes they come from."""
     problems: dict[tuple, bool | None] = {}
     for r in records:
-        problems[problem_key(r)] = r.get("trivial")
+        problems[problem_key(r)] = r.trivial
     return {"distinct": len(problems), "trivial": sum(1 for v in problems.values() if v),
             "known_trivial": sum(1 for v in problems.values() if v is not None),
-            "scenes": len({(r.get("scene_key") or r["scene_seed"], r["variant"]) for r in records})}
+            "scenes": len({(r.scene_key or r.scene_seed, r.variant) for r in records})}
 
 
-def metric(rec: dict[str, Any], name: str) -> float:
+def metric(rec: TrialRecord, name: str) -> float:
     """A metric of a trial as a float; NaN when the record does not have it (e.g. failures).
 
     `planning_time_s` is read from the record itself, `time_to_trajectory_s` is planning time plus
@@ -196,12 +292,12 @@ def metric(rec: dict[str, Any], name: str) -> float:
     if name == "time_to_trajectory_s":
         return metric(rec, "planning_time_s") + metric(rec, "timing_time_s")
     if name == "offline_s":  # a planner's offline preparation of the problem's world (gcs regions)
-        value = (rec.get("stats") or {}).get("offline_s")
+        value = (rec.stats or {}).get("offline_s")
         return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
     if name in TOP_LEVEL_METRICS:
-        value = rec.get(name)
+        value = getattr(rec, name)
     else:
-        value = (rec.get("metrics") or {}).get(name)
+        value = (rec.metrics or {}).get(name)
     if value is None or isinstance(value, bool):
         return math.nan
     try:
@@ -210,16 +306,16 @@ def metric(rec: dict[str, Any], name: str) -> float:
         return math.nan
 
 
-def metric_values(records: Iterable[dict[str, Any]], name: str, *, successful_only: bool = True) -> np.ndarray:
+def metric_values(records: Iterable[TrialRecord], name: str, *, successful_only: bool = True) -> np.ndarray:
     """The finite values of one metric over records (by default only successful ones)."""
     vals = [metric(r, name) for r in records if is_success(r) or not successful_only]
     arr = np.asarray(vals, dtype=float)
     return arr[np.isfinite(arr)]
 
 
-def joint_path(rec: dict[str, Any]) -> np.ndarray | None:
+def joint_path(rec: TrialRecord) -> np.ndarray | None:
     """The validated joint path (N, 7) in rad, or None if the record has none."""
-    path = rec.get("path")
+    path = rec.path
     if not path:
         return None
     arr = np.asarray(path, dtype=float)
@@ -228,9 +324,9 @@ def joint_path(rec: dict[str, Any]) -> np.ndarray | None:
     return arr
 
 
-def planners_in(records: Sequence[dict[str, Any]], manifest: dict[str, Any] | None = None) -> list[str]:
+def planners_in(records: Sequence[TrialRecord], manifest: dict[str, Any] | None = None) -> list[str]:
     """The planners of a run, in the manifest's order if it lists them, else in order of appearance."""
-    seen = list(dict.fromkeys(str(r["planner"]) for r in records))
+    seen = list(dict.fromkeys(str(r.planner) for r in records))
     listed = _manifest_planners(manifest or {})
     ordered = [p for p in listed if p in seen]
     return ordered + [p for p in seen if p not in ordered]
@@ -248,15 +344,15 @@ def _manifest_planners(manifest: dict[str, Any]) -> list[str]:
     return []
 
 
-def problem_kinds_in(records: Iterable[dict[str, Any]]) -> list[str]:
+def problem_kinds_in(records: Iterable[TrialRecord]) -> list[str]:
     """The problem kinds present, in cycle order (unknown kinds last, sorted)."""
-    present = {str(r["problem"]) for r in records}
+    present = {str(r.problem) for r in records}
     return [k for k in PROBLEM_KINDS if k in present] + sorted(present - set(PROBLEM_KINDS))
 
 
-def statuses_in(records: Iterable[dict[str, Any]]) -> list[str]:
+def statuses_in(records: Iterable[TrialRecord]) -> list[str]:
     """The statuses present, in the order of `STATUSES` (unknown ones last, sorted)."""
-    present = {str(r["status"]) for r in records}
+    present = {str(r.status) for r in records}
     return [s for s in STATUSES if s in present] + sorted(present - set(STATUSES))
 
 
