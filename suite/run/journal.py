@@ -13,9 +13,12 @@ import errno
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from scenes.errors import SuiteError
+
+if TYPE_CHECKING:
+    from suite.run.records import TrialRecord
 
 
 class RecordWriteError(SuiteError):
@@ -49,15 +52,15 @@ class TrialsJournal:
             raise RecordWriteError(self.path, exc) from None
         self.appended = 0
 
-    def append(self, record: dict[str, Any]) -> None:
-        """Write one record as one line and sync it to disk.
+    def append(self, record: TrialRecord) -> None:
+        """Write one record (its JSON, `TrialRecord.to_json`) as one line and sync it to disk.
 
         Raises:
             RecordWriteError: the line could not be written whole (the file is cut back to the
                 last whole record where possible), or the file was removed under the run.
         """
         assert self._fd is not None, "journal closed"
-        data = (json.dumps(record) + "\n").encode()
+        data = (json.dumps(record.to_json()) + "\n").encode()
         fd = self._fd
         try:
             st = os.fstat(fd)

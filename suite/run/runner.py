@@ -20,6 +20,7 @@ from pydantic import Field
 from scenes.errors import SuiteError
 from scenes.schema import NonNegInt, Pos, PosInt
 from suite.problems import DEFAULT_TIER
+from suite.run.records import TrialRecord
 from suite.run.trial import TrialSpec, config_dict, make_config, make_trial, run_trial
 
 log = logging.getLogger(__name__)
@@ -241,7 +242,7 @@ def _generated_problems(config: CompareConfig, progress):
             progress(scene_seed)
 
 
-def failure_record(spec: TrialSpec, status: str, message: str, wall_time_s: float) -> dict[str, Any]:
+def failure_record(spec: TrialSpec, status: str, message: str, wall_time_s: float) -> TrialRecord:
     """The record of a trial whose worker crashed or was killed: what was asked (`trial_record`,
     the one record builder) and how it ended."""
     from suite.run.trial import failed_record
@@ -359,7 +360,7 @@ def run_trials(trials: list[TrialSpec], *, out: Path, jobs: int, executor="local
                 with critical():  # a signal now waits until the line is whole and on disk
                     journal.append(record)
                 written.add(spec.trial_id)
-                bar.set_postfix_str(f"{spec.planner} {spec.problem.kind}: {record['status']}", refresh=False)
+                bar.set_postfix_str(f"{spec.planner} {spec.problem.kind}: {record.status}", refresh=False)
                 bar.update(1)
     finally:
         outcomes.close()  # an error or signal stops the workers at once (in-flight trials are rerun on resume)

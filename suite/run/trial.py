@@ -1,7 +1,8 @@
 """One trial: a planner on a problem, then the same validation, timing and scoring for all.
 
-`run_trial` is the function every executor runs (in a worker process); it returns the plain
-JSON record that the parent appends to trials.jsonl.
+`run_trial` is the function every executor runs (in a worker process); it returns the typed
+record (`suite.run.records.TrialRecord`) whose JSON the parent appends to trials.jsonl. The record
+is built here as that JSON object (`trial_record`, `judge_result`) and typed when it is whole.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 
 from planners.base import PlanningProblem, PlanResult, PlanStatus
 from suite.run.contention import ContentionProbe
+from suite.run.records import TrialRecord, reason_code
 from suite.scoring.validate import certify_path, over_limit, structure_reason, validate_path
 
 log = logging.getLogger(__name__)
@@ -111,7 +113,7 @@ def make_trial(problem: PlanningProblem, *, planner: str, planner_config: dict[s
                      dict(meta or {}))
 
 
-def run_problem(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int) -> dict[str, Any]:
+def run_problem(problem: PlanningProblem, *, planner: str, planner_config: dict[str, Any], run_seed: int) -> TrialRecord:
     """One trial in this process, seeded as `compare` seeds it."""
     return run_trial(make_trial(problem, planner=planner, planner_config=planner_config, run_seed=run_seed))
 
@@ -142,7 +144,7 @@ def trial_record(spec: TrialSpec) -> dict[str, Any]:
     }
 
 
-def run_trial(spec: TrialSpec) -> dict[str, Any]:
+def run_trial(spec: TrialSpec) -> TrialRecord:
     """Plan, validate, time and score one trial; never raises for a planner's failure.
 
     A MemoryError anywhere in the trial (the worker's memory cap, see `limit_memory`) gives a
@@ -161,17 +163,17 @@ def run_trial(spec: TrialSpec) -> dict[str, Any]:
 
 
 def failed_record(spec: TrialSpec, *, status: str, wall_time_s: float, stats: dict[str, Any],
-                  reason_code: str) -> dict[str, Any]:
+                  reason_code: str) -> TrialRecord:
     """The record of a trial that ended without a plan to judge (out of memory, a crashed or
     killed worker): `trial_record`'s fields, then the status, its cause and the wall time (its CPU
     time is not known)."""
     record = trial_record(spec)
     record.update(status=status, planning_time_s=wall_time_s, planning_cpu_time_s=None, path=None, metrics={},
                   stats=stats, reason_code=reason_code)
-    return record
+    return TrialRecord.from_json(record)
 
 
-def _run_trial(spec: TrialSpec) -> dict[str, Any]:
+def _run_trial(spec: TrialSpec) -> TrialRecord:
     from planners.registry import planner_class
     from planners.worlds import collision_world, planning_world
 
@@ -211,29 +213,27 @@ def _run_trial(spec: TrialSpec) -> dict[str, Any]:
     record["fcl_collide_calls"] = checks.fcl_calls - fcl0  # the pairs nothing cheaper decided, while planning
     record["warm"] = spec.planner in _PLANNED  # False: this worker's first trial of the planner
     _PLANNED.add(spec.planner)
-    record = judge_result(record, spec=spec, world=world, result=result, planning_time_s=planning_time_s,
-                          planning_cpu_time_s=planning_cpu_time_s)
+    judged = TrialRecord.from_json(judge_result(record, spec=spec, world=world, result=result,
+                                                planning_time_s=planning_time_s, planning_cpu_time_s=planning_cpu_time_s))
     if problem.plan_world is not None:
-        _perceived_verdict(record, problem, planned, result, world)
-    attribution = attribute(record["stats"], planning_time_s, fcl)
-    if attribution is not None:
-        record["attribution"] = attribution
-    return record
+        _perceived_verdict(judged, problem, planned, result, world)
+    judged.attribution = attribute(judged.stats, planning_time_s, fcl)
+    return judged
 
 
-def _perceived_verdict(record: dict[str, Any], problem, planned, result: PlanResult, judge_world) -> None:
+def _perceived_verdict(record: TrialRecord, problem, planned, result: PlanResult, judge_world) -> None:
     """A trial planned in another world than the judge's: which world each check used, and, for a
     path the judge rejected for a collision that is free in the planner's world, its
     perception-induced failure (`stats.perception_induced`: where, what it struck, why)."""
     from planners.worlds import collision_world
     from suite.scoring.perception_failure import perception_induced
 
-    record["worlds"] = {"planned": problem.plan_world.source, "judged": "truth", "physics": "truth"}
-    reason = str(record["stats"].get("invalid_reason", ""))
-    if record["status"] == PlanStatus.INVALID_SOLUTION.value and reason.startswith("collision"):
+    record.worlds = {"planned": problem.plan_world.source, "judged": "truth", "physics": "truth"}
+    reason = str(record.stats.get("invalid_reason", ""))
+    if record.status == PlanStatus.INVALID_SOLUTION.value and reason.startswith("collision"):
         found = perception_induced(problem, result.path, judge_world, collision_world(planned))
         if found is not None:
-            record["stats"]["perception_induced"] = found
+            record.stats["perception_induced"] = found
 
 
 def attribute(stats: dict[str, Any], planning_time_s: float,
@@ -352,8 +352,6 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
                            reference_length_rad=spec.meta.get("reference_length_rad"),
                            reference_ee_length_m=spec.meta.get("reference_ee_length_m"))
             metrics = record_metrics(scored)  # NaN (undefined, or timing failed) stored as null
-    from suite.run.records import reason_code
-
     record.update(
         status=status.value,
         planning_time_s=planning_time_s,
@@ -364,7 +362,7 @@ def judge_result(record: dict[str, Any], *, spec: TrialSpec, world, result: Plan
         certification=certification,
         stats=_jsonable(stats),
     )
-    record["reason_code"] = reason_code(record)  # a fresh record (`trial_record`): worked out, not read
+    record["reason_code"] = reason_code(TrialRecord.from_json(record))  # a fresh record: worked out, not read
     return record
 
 

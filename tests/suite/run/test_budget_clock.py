@@ -18,6 +18,7 @@ from planners.base import Budget, PlanStatus
 from scenes.errors import SuiteError
 from suite.problems import DEFAULT_TIER
 from suite.run.contention import ContentionProbe, is_contended, run_contention
+from suite.run.records import TrialRecord
 from suite.run.trial import late_after_s, make_trial, run_trial
 
 
@@ -117,23 +118,23 @@ def _trial(problem, meta, planner, clock):
 def test_a_cpu_budget_survives_a_sleep_a_wall_budget_does_not(problem, sleepy_rrt):
     p, meta = problem
     cpu = _trial(p, meta, sleepy_rrt, "cpu")
-    assert cpu["status"] == "success", cpu["stats"].get("reason")
-    assert cpu["budget_clock"] == "cpu" and cpu["format_version"] == 2
+    assert cpu.status == "success", cpu.stats.get("reason")
+    assert cpu.budget_clock == "cpu" and cpu.format_version == 2
     # judged on its CPU time: its wall time alone would have made it late
-    assert cpu["planning_time_s"] > late_after_s(BUDGET_S) >= SLEEP_S - 0.5
-    assert cpu["planning_cpu_time_s"] < late_after_s(BUDGET_S)
+    assert cpu.planning_time_s > late_after_s(BUDGET_S) >= SLEEP_S - 0.5
+    assert cpu.planning_cpu_time_s < late_after_s(BUDGET_S)
     assert cpu["contention"]["cpu_wait_s"] is not None  # measured (Linux)
     wall = _trial(p, meta, sleepy_rrt, "wall")
-    assert wall["status"] == "timeout" and wall["budget_clock"] == "wall" and wall["format_version"] == 1
-    assert wall["trial_id"] != cpu["trial_id"]  # the clock is part of a cpu trial's identity
+    assert wall.status == "timeout" and wall.budget_clock == "wall" and wall.format_version == 1
+    assert wall.trial_id != cpu.trial_id  # the clock is part of a cpu trial's identity
 
 
 def test_a_record_has_its_cpu_time_beside_its_wall_time(problem):
     p, meta = problem
     r = _trial(p.with_(time_limit_s=30.0), meta, "rrt", "wall")
-    assert r["status"] == "success"
-    assert 0 < r["planning_cpu_time_s"] <= r["planning_time_s"] * 1.5 + 0.05  # one thread, at most a little more
-    c = r["contention"]
+    assert r.status == "success"
+    assert 0 < r.planning_cpu_time_s <= r.planning_time_s * 1.5 + 0.05  # one thread, at most a little more
+    c = r.contention
     assert set(c) == {"cpu_wait_s", "steal_s", "machine_cpu_s", "others_cpu_s", "load1", "runnable", "cores",
                       "contended"}
     assert c["cores"] >= 1 and isinstance(c["contended"], bool)
@@ -142,7 +143,7 @@ def test_a_record_has_its_cpu_time_beside_its_wall_time(problem):
     blob = json.dumps({"scene": q.scene.key(), "scene_seed": q.scene.seed, "can": q.can_id, "problem": q.kind,
                        "seed": q.seed, "time_limit_s": q.time_limit_s, "planner": "rrt", "config": {}},
                       sort_keys=True)
-    assert r["trial_id"] == hashlib.sha256(blob.encode()).hexdigest()[:20]
+    assert r.trial_id == hashlib.sha256(blob.encode()).hexdigest()[:20]
 
 
 # --- the contention rule ------------------------------------------------------------------------
@@ -168,15 +169,15 @@ def test_a_probe_measures_a_quiet_stretch():
 # --- the run: manifest, summary, flag -----------------------------------------------------------
 
 
-def _records(n: int, contended: set[int], *, clock: str = "wall") -> list[dict]:
+def _records(n: int, contended: set[int], *, clock: str = "wall") -> list[TrialRecord]:
     out = []
     for i in range(n):
         wait = 0.5 if i in contended else 0.001
-        out.append({"trial_id": f"t{i}", "planner": "rrt" if i % 2 else "ik", "status": "success",
+        out.append(TrialRecord.from_json({"trial_id": f"t{i}", "planner": "rrt" if i % 2 else "ik", "status": "success",
                     "problem": "transit", "scene_seed": i, "variant": "open", "can_id": 0, "budget_clock": clock,
                     "planning_time_s": 1.0, "planning_cpu_time_s": 1.0 - wait,
                     "contention": {"cpu_wait_s": wait, "steal_s": 0.0, "machine_cpu_s": 2.0, "others_cpu_s": 1.0,
-                                   "load1": 3.5 if i in contended else 1.0, "runnable": 3, "cores": 2}})
+                                   "load1": 3.5 if i in contended else 1.0, "runnable": 3, "cores": 2}}))
     return out
 
 
@@ -190,7 +191,7 @@ def test_run_contention_counts_and_names_the_contended_trials():
 
 
 def test_a_planner_of_short_trials_that_waited_together_makes_the_run_contended():
-    recs = [dict(r, planning_time_s=0.005, contention={**r["contention"], "cpu_wait_s": 0.004})
+    recs = [r.with_(planning_time_s=0.005, contention={**r.contention, "cpu_wait_s": 0.004})
             for r in _records(6, set())]
     s = run_contention(recs)
     assert s["contended"] == 0  # each under the 10 ms floor
@@ -209,16 +210,16 @@ def test_the_summary_warns_of_a_contended_run_and_names_its_trials(tmp_path):
     run = write_run(tmp_path / "run", synthetic_records(variants=("open",), cans=1))
     path = run / "trials.jsonl"
     recs = read_trials(path)
-    quiet = [dict(r, contention={"cpu_wait_s": 0.0, "steal_s": 0.0, "machine_cpu_s": 2.0}) for r in recs]
+    quiet = [r.with_(contention={"cpu_wait_s": 0.0, "steal_s": 0.0, "machine_cpu_s": 2.0}) for r in recs]
     assert contention_warning(quiet) is None
-    loaded = [dict(r, contention={"cpu_wait_s": r["planning_time_s"] * 0.5 + 0.02, "steal_s": 0.0,
+    loaded = [r.with_(contention={"cpu_wait_s": r.planning_time_s * 0.5 + 0.02, "steal_s": 0.0,
                                   "machine_cpu_s": 2.0}) if i < 3 else r for i, r in enumerate(quiet)]
-    path.write_text("".join(json.dumps(r) + "\n" for r in loaded))
+    path.write_text("".join(json.dumps(r.to_json()) + "\n" for r in loaded))
     from suite.report.write import write_report
 
     write_report(run, plots=False, html=True)
     md = (run / "summary.md").read_text()
-    ids = [r["trial_id"] for r in loaded[:3]]
+    ids = [r.trial_id for r in loaded[:3]]
     head = md.split("\n## ")[0]
     assert "Warning: the machine was contended" in head and all(i in head for i in ids)
     assert f"3 of {len(loaded)} measured trials" in head

@@ -7,7 +7,7 @@ import pytest
 from planners.base import FailureReason
 from suite.report.summary import summary_json
 from suite.report.summary_tables import reason_code_rows
-from suite.run.records import reason_code
+from suite.run.records import TrialRecord, reason_code
 
 CODES = {r.value for r in FailureReason}
 
@@ -31,17 +31,16 @@ CODES = {r.value for r in FailureReason}
     ({"status": "no_solution", "stats": {}, "reason_code": "solver_failed"}, "solver_failed"),
 ])
 def test_each_record_gets_one_cause(record, code):
-    got = reason_code(record)
+    got = reason_code(TrialRecord(planner="p", problem="transit", scene_seed=0, variant="open", can_id=0, **record))
     assert got == code
     assert got is None or got in CODES
 
 
 def test_the_summary_counts_causes_per_planner_and_family():
     def rec(planner, family, status, **stats):
-        return {"planner": planner, "variant": family, "family": family, "status": status, "stats": stats,
-                "problem": "transit", "scene_key": family, "can_id": 0, "scene_seed": 0, "q_start": [0.0] * 7,
-                "q_goal": [0.0] * 7, "held": False, "planning_time_s": 1.0, "time_limit_s": 5.0, "metrics": {},
-                "path": None}
+        return TrialRecord(planner=planner, variant=family, family=family, status=status, stats=stats,
+                           problem="transit", scene_key=family, can_id=0, scene_seed=0, q_start=[0.0] * 7,
+                           q_goal=[0.0] * 7, held=False, planning_time_s=1.0, time_limit_s=5.0, metrics={}, path=None)
     records = [rec("a", "wall", "no_solution", reason_code="search_failed"),
                rec("a", "window", "no_solution", reason_code="search_failed"),
                rec("a", "window", "timeout"),

@@ -39,7 +39,7 @@ FAULTY = Path(__file__).resolve().parents[2] / "fixtures" / "faulty"
 
 
 def _ids(path: Path) -> list[str]:
-    return [r["trial_id"] for r in read_trials(path)]
+    return [r.trial_id for r in read_trials(path)]
 
 
 def _one_error_line(capsys) -> str:
@@ -159,12 +159,12 @@ def test_runaway_memory_is_a_crash_record_and_the_run_goes_on(ik_trials, tmp_pat
     ex = make_executor("local", jobs=1, memory_limit_mb=2048)
     counts = run_trials(trials, out=out, jobs=1, executor=ex, progress_bar=False)
     assert counts["ran"] == 10
-    recs = {(r["planner"], r["problem"]): r for r in read_trials(out)}
+    recs = {(r.planner, r.problem): r for r in read_trials(out)}
     oom = recs[("hungry", "descend")]
-    assert oom["status"] == "crash" and oom["stats"]["reason"] == "out_of_memory"
+    assert oom.status == "crash" and oom["stats"]["reason"] == "out_of_memory"
     assert oom["stats"]["memory_limit_mb"] == 2048
-    assert all(recs[("ik", k)]["status"] == "success" for k in ("approach", "descend", "lift"))
-    assert recs[("hungry", "lift")]["status"] == "no_solution"  # the next trial ran in a fresh worker
+    assert all(recs[("ik", k)].status == "success" for k in ("approach", "descend", "lift"))
+    assert recs[("hungry", "lift")].status == "no_solution"  # the next trial ran in a fresh worker
 
 
 # --- format versions -------------------------------------------------------------------------------

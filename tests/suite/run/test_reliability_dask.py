@@ -46,15 +46,15 @@ def test_lost_worker_trial_retried_once_or_crash_nothing_lost_or_doubled(tmp_pat
     finally:
         cluster.close()
     recs = read_trials(out)
-    ids = [r["trial_id"] for r in recs]
+    ids = [r.trial_id for r in recs]
     assert counts == {"total": 10, "skipped": 0, "ran": 10}
     assert sorted(ids) == sorted(t.trial_id for t in trials)  # lost 0, doubled 0
-    by = {(r["planner"], r["problem"]): r for r in recs}
+    by = {(r.planner, r.problem): r for r in recs}
     assert (tmp_path / "killed-transit").exists()
-    assert by[("workerkiller", "transit")]["status"] == "no_solution"  # retried once, elsewhere
+    assert by[("workerkiller", "transit")].status == "no_solution"  # retried once, elsewhere
     lift = by[("workerkiller", "lift")]
     if kill_always:
-        assert lift["status"] == "crash" and "Dask worker died" in lift["stats"]["error"]
+        assert lift.status == "crash" and "Dask worker died" in lift["stats"]["error"]
     else:
-        assert lift["status"] == "no_solution"
-    assert all(by[("ik", k)]["status"] == "success" for k in ("approach", "descend", "lift"))
+        assert lift.status == "no_solution"
+    assert all(by[("ik", k)].status == "success" for k in ("approach", "descend", "lift"))
