@@ -7,7 +7,7 @@ of `scenes.collision.kernel_codes`) into its cached code and invalidates a cache
 when its own file changes: an edit of the field list here would leave the kernels of
 `scenes.collision.kernel_state` and `scenes.collision.kernel_motion` reading the wrong fields. So the cache is keyed on `KEY`, a hash of the kernel modules' sources
 (`KERNEL_MODULES`, found by module name through importlib, not by path: the files may move) and of
-the field layout (`layout()`): every kernel's cache lives under `fcl-kernels-<KEY[:16]>` in the
+the field layout (`layout()`): every kernel's cache lives under `collision-kernels-<KEY[:16]>` in the
 cache directory, with `KEY` as numba's source stamp. Another key is another directory; the same
 sources at another path load the same cache.
 
@@ -123,7 +123,7 @@ def cache_dir(candidates: list[Path] | None = None) -> Path | None:
 
 def keyed_path(base: Path, key: str) -> Path:
     """The directory of the kernels' cache keyed `key` under `base`."""
-    return base / f"fcl-kernels-{key[:16]}"
+    return base / f"collision-kernels-{key[:16]}"
 
 
 KEY = cache_key(kernel_sources(), layout())

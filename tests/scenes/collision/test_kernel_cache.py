@@ -243,7 +243,7 @@ def test_an_unwritable_cache_compiles_in_memory(tmp_path, caplog):
     blocked = tmp_path / "file"
     blocked.write_text("")  # a file where the directory should be
     with caplog.at_level(logging.WARNING, logger=D.__name__):
-        f = D.keyed_jit(_double, path=blocked / "fcl-kernels-x", key="x")
+        f = D.keyed_jit(_double, path=blocked / "collision-kernels-x", key="x")
         assert f(2.0) == 4.0
     assert f.stats.cache_path is None and "compiled in memory" in caplog.text
 
@@ -263,7 +263,7 @@ def test_an_unwritable_cache_compiles_in_memory(tmp_path, caplog):
 
 
 def test_a_cold_cache_is_created_and_a_warm_one_loads_in_process(tmp_path):
-    path = tmp_path / "cold" / "fcl-kernels-z"
+    path = tmp_path / "cold" / "collision-kernels-z"
     f = D.keyed_jit(_double, path=path, key="z")
     assert f(1.5) == 3.0 and f.stats.cache_misses and not f.stats.cache_hits
     assert any(path.glob("*.nbi"))
