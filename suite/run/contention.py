@@ -36,7 +36,10 @@ import os
 import statistics
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from suite.run.records import TrialRecord
 
 #: A trial is contended when its run-queue wait is above this share of its planning wall time ...
 WAIT_SHARE = 0.10
@@ -165,9 +168,9 @@ def is_contended(contention: dict[str, Any] | None, *, wall_s: float | None) -> 
     return False if known else None
 
 
-def record_contended(record: dict[str, Any]) -> bool | None:
+def record_contended(record: TrialRecord) -> bool | None:
     """Whether a trial record was contended, by the current rule (None: it measured nothing)."""
-    return is_contended(record.get("contention"), wall_s=record.get("planning_time_s"))
+    return is_contended(record.contention, wall_s=record.planning_time_s)
 
 
 # --- the run -------------------------------------------------------------------------------------
@@ -205,7 +208,7 @@ def median_or_none(values: list[float]) -> float | None:
     return statistics.median(values) if values else None
 
 
-def run_contention(records: Sequence[dict[str, Any]], *, machine: dict[str, Any] | None = None) -> dict[str, Any]:
+def run_contention(records: Sequence[TrialRecord], *, machine: dict[str, Any] | None = None) -> dict[str, Any]:
     """A run's contention from its records: how many trials were measured and contended (and which),
     their share of planning wall time spent waiting for a CPU, the load average they saw, and the
     budget clock(s) of the run; `machine`, the parent's `machine_across` of the run, if known.
@@ -224,17 +227,17 @@ def run_contention(records: Sequence[dict[str, Any]], *, machine: dict[str, Any]
         if verdict is None:
             continue
         measured += 1
-        p = by_planner.setdefault(str(rec.get("planner")), {"measured": 0, "contended": 0, "cpu_wait_s": 0.0,
+        p = by_planner.setdefault(str(rec.planner), {"measured": 0, "contended": 0, "cpu_wait_s": 0.0,
                                                             "planning_wall_s": 0.0})
         p["measured"] += 1
         if verdict:
             contended += 1
             p["contended"] += 1
-            ids.append(str(rec.get("trial_id")))
-        c = rec["contention"]
-        if isinstance(c.get("cpu_wait_s"), (int, float)) and isinstance(rec.get("planning_time_s"), (int, float)):
+            ids.append(str(rec.trial_id))
+        c = rec.contention
+        if isinstance(c.get("cpu_wait_s"), (int, float)) and isinstance(rec.planning_time_s, (int, float)):
             p["cpu_wait_s"] += c["cpu_wait_s"]
-            p["planning_wall_s"] += rec["planning_time_s"]
+            p["planning_wall_s"] += rec.planning_time_s
         if isinstance(c.get("load1"), (int, float)):
             loads.append(float(c["load1"]))
     for p in by_planner.values():
@@ -244,7 +247,7 @@ def run_contention(records: Sequence[dict[str, Any]], *, machine: dict[str, Any]
         p["cpu_wait_s"], p["planning_wall_s"] = round(wait, 6), round(wall, 6)
     wait_s = sum(p["cpu_wait_s"] for p in by_planner.values())
     wall_s = sum(p["planning_wall_s"] for p in by_planner.values())
-    clocks = sorted({str(r.get("budget_clock", "wall")) for r in records})
+    clocks = sorted({str(r.budget_clock or "wall") for r in records})
     return {"rule": RULE, "budget_clock": clocks[0] if len(clocks) == 1 else clocks, "trials": len(records),
             "measured": measured, "contended": contended, "contended_ids": ids, "by_planner": by_planner,
             "cpu_wait_share": round(wait_s / wall_s, 4) if wall_s > 0 else None,

@@ -21,6 +21,7 @@ import numpy as np
 
 from planners.base import PlanningProblem
 from scenes.scene import HeldCan, Scene
+from suite.run.records import TrialRecord
 
 log = logging.getLogger(__name__)
 
@@ -36,7 +37,7 @@ class RecordedProblems:
         manifest: the run's manifest.json as a dict (may be empty).
     """
 
-    def __init__(self, records: Sequence[dict[str, Any]], manifest: dict[str, Any]) -> None:
+    def __init__(self, records: Sequence[TrialRecord], manifest: dict[str, Any]) -> None:
         self.records = records
         self.manifest = manifest
         self.config = manifest.get("config") or {}
@@ -46,10 +47,10 @@ class RecordedProblems:
         #: per (variant, scene seed): the scene's motions by (can id, kind), or why there are none
         self._cycles: dict[tuple[str, int], dict[tuple[int, str], PlanningProblem] | str] = {}
 
-    def problem(self, rec: dict[str, Any]) -> PlanningProblem:
+    def problem(self, rec: TrialRecord) -> PlanningProblem:
         """The record's problem. Raises Unrebuildable with the reason."""
         problem = self._from_dataset(rec) if self.manifest.get("dataset") else self._from_scene(rec)
-        pid = rec.get("problem_id")
+        pid = rec.problem_id
         if pid:
             from suite.problems.identity import problem_id
 
@@ -64,17 +65,17 @@ class RecordedProblems:
 
         return identity_rule(self._dataset.manifest if self._dataset is not None else self.manifest)
 
-    def reference(self, rec: dict[str, Any], field: str) -> float | None:
+    def reference(self, rec: TrialRecord, field: str) -> float | None:
         """A reference figure of the record's problem (`reference_length_rad`, ...): the record's own,
         else its dataset's."""
-        value = rec.get(field)
+        value = getattr(rec, field)
         if value is None and self._dataset is not None:
-            value = (self._dataset.meta.get(rec.get("problem_id")) or {}).get(field)
+            value = (self._dataset.meta.get(rec.problem_id) or {}).get(field)
         return None if value is None else float(value)
 
     # --- runs on a dataset ------------------------------------------------------------------------
 
-    def _from_dataset(self, rec: dict[str, Any]) -> PlanningProblem:
+    def _from_dataset(self, rec: TrialRecord) -> PlanningProblem:
         if self._dataset is None and self._dataset_error is None:
             from scenes.errors import SuiteError
             from suite.problems.dataset import load_dataset
@@ -91,7 +92,7 @@ class RecordedProblems:
                                 "content (problem_id)", info["name"], self._dataset.hash, info["hash"])
         if self._dataset_error is not None:
             raise Unrebuildable(self._dataset_error)
-        pid = rec.get("problem_id")
+        pid = rec.problem_id
         if not pid:
             raise Unrebuildable("record has no problem_id")
         if pid not in self._dataset_problems:
@@ -100,8 +101,8 @@ class RecordedProblems:
 
     # --- runs on generated scenes -----------------------------------------------------------------
 
-    def _from_scene(self, rec: dict[str, Any]) -> PlanningProblem:
-        key = (str(rec["variant"]), int(rec["scene_seed"]))
+    def _from_scene(self, rec: TrialRecord) -> PlanningProblem:
+        key = (str(rec.variant), int(rec.scene_seed))
         if key not in self._cycles:
             try:
                 self._cycles[key] = self._scene_problems(*key)
@@ -110,17 +111,17 @@ class RecordedProblems:
         cycle = self._cycles[key]
         if isinstance(cycle, str):
             raise Unrebuildable(cycle)
-        problem = cycle.get((int(rec["can_id"]), str(rec["problem"])))
+        problem = cycle.get((int(rec.can_id), str(rec.problem)))
         if problem is None:
             raise Unrebuildable("no such can or motion in the regenerated scene")
-        if rec.get("scene_key") and rec["scene_key"] != problem.scene.key():
+        if rec.scene_key and rec.scene_key != problem.scene.key():
             raise Unrebuildable("regenerated scene differs from the run's")
-        if "held" in rec and bool(rec["held"]) != (problem.held is not None):
+        if rec.held is not None and bool(rec.held) != (problem.held is not None):
             raise Unrebuildable("held can differs from the run's")
-        if rec.get("q_start") is None or rec.get("q_goal") is None:
+        if rec.q_start is None or rec.q_goal is None:
             raise Unrebuildable("record has no q_start or q_goal")
-        return problem.with_(q_start=np.asarray(rec["q_start"], float), q_goal=np.asarray(rec["q_goal"], float),
-                             time_limit_s=float(rec.get("time_limit_s") or 1.0))
+        return problem.with_(q_start=np.asarray(rec.q_start, float), q_goal=np.asarray(rec.q_goal, float),
+                             time_limit_s=float(rec.time_limit_s or 1.0))
 
     def _scene(self, variant: str, seed: int) -> Scene:
         """The run's scene regenerated as the run generated it, checked against the records' key."""
@@ -128,14 +129,14 @@ class RecordedProblems:
         from scenes.generate import generate_scene
         from scenes.spec import load_spec
 
-        mine = [r for r in self.records if str(r["variant"]) == variant and int(r["scene_seed"]) == seed]
-        keys = Counter(r["scene_key"] for r in mine if r.get("scene_key"))
+        mine = [r for r in self.records if str(r.variant) == variant and int(r.scene_seed) == seed]
+        keys = Counter(r.scene_key for r in mine if r.scene_key)
         want = keys.most_common(1)[0][0] if keys else None
         try:
             spec = load_spec(self.config.get("spec"), variant=variant)
             count = self.config.get("cans")
             if not isinstance(count, int):
-                count = 1 + max(int(r["can_id"]) for r in mine)
+                count = 1 + max(int(r.can_id) for r in mine)
             spec = spec.with_can_count(count)
             # Without the reachability check (no IK) first: on most plates it gives the run's scene,
             # which the key confirms. Without a key, generate exactly as the run did.
@@ -161,7 +162,7 @@ class RecordedProblems:
         wp = spec.waypoints
         X_plate, X_bin = waypoint_pose(wp.above_plate_m), waypoint_pose(wp.above_bin_m)
         opening, closed = spec.grasp.open_width_m, 2 * spec.can.radius_m
-        mine = [r for r in self.records if str(r["variant"]) == variant and int(r["scene_seed"]) == seed]
+        mine = [r for r in self.records if str(r.variant) == variant and int(r.scene_seed) == seed]
         out: dict[tuple[int, str], PlanningProblem] = {}
         removed: tuple[int, ...] = ()
         try:
@@ -187,8 +188,8 @@ class RecordedProblems:
                     removed_can_ids=tuple(removed_), time_limit_s=1.0, seed=seed,
                 )
             # build_problems counts a can as recycled once its transit had a goal configuration.
-            transits = [r for r in mine if int(r["can_id"]) == can_id and r["problem"] == "transit"]
-            if not transits or any(r.get("q_goal") is not None for r in transits):
+            transits = [r for r in mine if int(r.can_id) == can_id and r.problem == "transit"]
+            if not transits or any(r.q_goal is not None for r in transits):
                 removed = removed_after
         return out
 

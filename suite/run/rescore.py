@@ -21,6 +21,7 @@ from typing import Any
 
 from scenes.errors import SuiteError
 from suite.run.recorded_problems import RecordedProblems, Unrebuildable
+from suite.run.records import TrialRecord
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +57,7 @@ class RescoreCounts:
         return text
 
 
-def rescore_records(records: Sequence[dict[str, Any]], manifest: dict[str, Any]) -> tuple[list[dict], RescoreCounts]:
+def rescore_records(records: Sequence[TrialRecord], manifest: dict[str, Any]) -> tuple[list[TrialRecord], RescoreCounts]:
     """New copies of the records with every metric recomputed from their stored paths.
 
     Args:
@@ -89,23 +90,23 @@ def rescore_records(records: Sequence[dict[str, Any]], manifest: dict[str, Any])
             continue
         world = collision_world(problem)
         timed = time_parameterize(path, robot=world.robot)
-        timing_changed += timed.ok != (rec.get("status") != "timing_failed")
+        timing_changed += timed.ok != (rec.status != "timing_failed")
         scored = score(path=path, world=world, X_WG_goal=problem.X_WG_goal, timed=timed,
                        reference_length_rad=problems.reference(rec, "reference_length_rad"),
                        reference_ee_length_m=problems.reference(rec, "reference_ee_length_m"))
         certification = certify_path(path, world) if structure_reason(problem, path, world) is None else None
-        out.append({**rec, "metrics": record_metrics(scored), "certification": certification})
+        out.append(rec.with_(metrics=record_metrics(scored), certification=certification))
         rescored += 1
     return out, RescoreCounts(len(records), with_path, rescored, dict(kept), timing_changed)
 
 
-def write_trials_atomically(path: Path, records: Sequence[dict[str, Any]]) -> None:
+def write_trials_atomically(path: Path, records: Sequence[TrialRecord]) -> None:
     """Replace a trials.jsonl with these records: a temporary file beside it, then one rename."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:
             for rec in records:
-                f.write(json.dumps(rec) + "\n")
+                f.write(json.dumps(rec.to_json()) + "\n")
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)

@@ -123,7 +123,7 @@ def test_a_cpu_budget_survives_a_sleep_a_wall_budget_does_not(problem, sleepy_rr
     # judged on its CPU time: its wall time alone would have made it late
     assert cpu.planning_time_s > late_after_s(BUDGET_S) >= SLEEP_S - 0.5
     assert cpu.planning_cpu_time_s < late_after_s(BUDGET_S)
-    assert cpu["contention"]["cpu_wait_s"] is not None  # measured (Linux)
+    assert cpu.contention["cpu_wait_s"] is not None  # measured (Linux)
     wall = _trial(p, meta, sleepy_rrt, "wall")
     assert wall.status == "timeout" and wall.budget_clock == "wall" and wall.format_version == 1
     assert wall.trial_id != cpu.trial_id  # the clock is part of a cpu trial's identity

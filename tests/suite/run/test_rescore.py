@@ -76,32 +76,32 @@ def test_rescore_reproduces_the_metrics_and_is_invariant_to_densified_paths(tmp_
     assert counts.rescored == counts.with_path == len(with_path) and not counts.kept
     assert "rescored 24 of 24" in counts.line() and "ik" in table
     first = read_trials(run)
-    assert [r["trial_id"] for r in first] == [r["trial_id"] for r in records]  # order and records kept
+    assert [r.trial_id for r in first] == [r["trial_id"] for r in records]  # order and records kept
     assert not [p.name for p in run.iterdir() if p.name.endswith(".tmp")]
     assert (run / "summary.md").is_file()
     tilts = 0
     for old, new in zip(records, first):
         rescored = ("metrics", "certification")
-        assert {k: v for k, v in new.items() if k not in rescored} == {k: v for k, v in old.items() if k not in rescored}
+        assert {k: v for k, v in new.to_json().items() if k not in rescored} == {k: v for k, v in old.items() if k not in rescored}
         if not old["path"]:
-            assert new["metrics"] == {}
+            assert new.metrics == {}
             continue
-        assert new["certification"]["verdict"] in ("certified", "unproved", "collision")
+        assert new.certification["verdict"] in ("certified", "unproved", "collision")
         # The same metrics as scoring the stored path in a world built by hand.
         world, X_goal = hand_built(old)
         want = score(path=np.asarray(old["path"]), world=world, X_WG_goal=X_goal)
-        assert_same_metrics(new["metrics"], {k: (v if math.isfinite(v) else None) for k, v in want.items()}, rel=1e-9)
-        assert new["metrics"]["path_length_rad"] == pytest.approx(old["metrics"]["path_length_rad"], rel=1e-12)
+        assert_same_metrics(new.metrics, {k: (v if math.isfinite(v) else None) for k, v in want.items()}, rel=1e-9)
+        assert new.metrics["path_length_rad"] == pytest.approx(old["metrics"]["path_length_rad"], rel=1e-12)
         carried_upright = world.held is not None and not world.held.can.lying
-        assert (new["metrics"]["can_tilt_max_deg"] is not None) == carried_upright
+        assert (new.metrics["can_tilt_max_deg"] is not None) == carried_upright
         tilts += carried_upright
     assert tilts > 0  # some motions carry an upright can
     # A midpoint in every stored segment, rescored: the same values within 1%.
-    dense = [{**r, "path": with_midpoints(r["path"])} if r["path"] else r for r in first]
+    dense = [{**r.to_json(), "path": with_midpoints(r.path)} if r.path else r.to_json() for r in first]
     write_run(run, dense, cans=2)
     rescore_run(run)
     for a, b in zip(first, read_trials(run)):
-        assert_same_metrics(b["metrics"], a["metrics"], rel=0.01)
+        assert_same_metrics(b.metrics, a.metrics, rel=0.01)
 
 
 def test_records_whose_world_cannot_be_rebuilt_keep_their_metrics(tmp_path, records, capsys):
@@ -129,8 +129,8 @@ def test_records_whose_world_cannot_be_rebuilt_keep_their_metrics(tmp_path, reco
     assert "regenerated scene differs from the run's" in out and "does not hash to its problem_id" in out
     after = read_trials(run)
     for i in solved[:2]:
-        assert after[i]["metrics"] == recs[i]["metrics"]  # kept as stored
-    assert "turning_angle_rad" in after[solved[2]]["metrics"]
+        assert after[i].metrics == recs[i]["metrics"]  # kept as stored
+    assert "turning_angle_rad" in after[solved[2]].metrics
 
 
 def test_a_dataset_run_takes_problems_and_references_from_the_dataset(tmp_path, records):
@@ -167,7 +167,7 @@ def test_a_dataset_run_takes_problems_and_references_from_the_dataset(tmp_path, 
     (run / "manifest.json").write_text(json.dumps(manifest))
     counts = rescore_run(run)
     assert counts.rescored == 1 and counts.kept == {"problem_id not in the dataset": 1}
-    got = read_trials(run)[0]["metrics"]
+    got = read_trials(run)[0].metrics
     want = score(path=np.asarray(rec["path"]), world=world, X_WG_goal=X_goal, reference_length_rad=length)
     assert got["length_ratio"] == pytest.approx(want["path_length_rad"] / length, rel=1e-12)
     assert got["length_ratio"] > 1.0
