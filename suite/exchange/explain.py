@@ -10,9 +10,14 @@ overlap and by how much, naming every colliding pair.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import fcl
 import numpy as np
+
+if TYPE_CHECKING:
+    from suite.run.records import TrialRecord
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,7 +87,7 @@ def penetration(path: np.ndarray, world) -> Penetration:
     return Penetration(len(bad), len(dense), scene, self_depth, tuple(sorted(pairs)))
 
 
-def explain_rejections(results, dataset: str, records) -> list[str]:
+def explain_rejections(results, dataset: str, records: Sequence[TrialRecord]) -> list[str]:
     """One line per imported path the validator rejected for collision, then a summary line.
 
     Args:
@@ -99,15 +104,15 @@ def explain_rejections(results, dataset: str, records) -> list[str]:
     paths = {ln.problem_id: ln.path_array for ln in read_results(results, known=set(ds.ids), dataset=dataset)}
     out, depths = [], []
     for rec in records:
-        reason = (rec.get("stats") or {}).get("invalid_reason") or ""
-        if rec.get("status") != "invalid_solution" or not reason.startswith("collision"):
+        reason = (rec.stats or {}).get("invalid_reason") or ""
+        if rec.status != "invalid_solution" or not reason.startswith("collision"):
             continue
-        pid = rec["problem_id"]
+        pid = rec.problem_id
         p = penetration(paths[pid], collision_world(problems[pid]))
         depths.append(max(p.scene_depth_m, p.self_depth_m))
-        out.append(f"  {pid} {rec.get('family', '')} {rec['problem']}: {p.line()}")
-    claimed = sum(1 for r in records if (r.get("stats") or {}).get("reported_status") is not None
-                  and r["status"] in ("success", "invalid_solution", "timing_failed"))
+        out.append(f"  {pid} {rec.family or ''} {rec.problem}: {p.line()}")
+    claimed = sum(1 for r in records if (r.stats or {}).get("reported_status") is not None
+                  and r.status in ("success", "invalid_solution", "timing_failed"))
     if depths:
         d = np.asarray(depths) * 1000
         out.append(f"{len(depths)} of {claimed} claimed paths collide at the validator's samples; deepest "

@@ -27,7 +27,7 @@ from pydantic import Field
 from planners.base import PlanResult, PlanStatus
 from scenes.errors import SuiteError
 from scenes.schema import load
-from suite.run.records import MANIFEST_FILE, NO_RESULT, TRIALS_FILE
+from suite.run.records import MANIFEST_FILE, NO_RESULT, TRIALS_FILE, TrialRecord
 
 #: Reported statuses kept as the record's status when the line has no path; any other word with
 #: no path is recorded as no_solution.
@@ -142,9 +142,10 @@ class ImportCounts:
         return text
 
 
-def judge_results(lines: list[ResultLine], ds, *, planner: str) -> list[dict[str, Any]]:
+def judge_results(lines: list[ResultLine], ds, *, planner: str) -> list[TrialRecord]:
     """One trial record per problem of the dataset (tier), in its order: judged lines, and
-    no_result for the problems the file leaves out."""
+    no_result for the problems the file leaves out (`hardware` and `notes`, the line's own,
+    kept in its `extra`)."""
     from planners.worlds import collision_world
     from suite.run.trial import judge_result, make_trial, trial_record
 
@@ -173,7 +174,7 @@ def judge_results(lines: list[ResultLine], ds, *, planner: str) -> list[dict[str
             if line.notes is not None:
                 record["notes"] = line.notes
             bar.update(1)
-        records.append(record)
+        records.append(TrialRecord.from_json(record))
     bar.close()
     return records
 
@@ -230,15 +231,15 @@ def import_results(*, dataset: str, results: str | Path, planner: str, out: str 
             _add_to_manifest(run_dir, provenance)
             mode = "a"
         with open(run_dir / TRIALS_FILE, mode) as f:
-            f.write("".join(json.dumps(r) + "\n" for r in records))
+            f.write("".join(json.dumps(r.to_json()) + "\n" for r in records))
             f.flush()
             os.fsync(f.fileno())
     except OSError as exc:
         raise SuiteError(f"cannot write the run {str(run_dir)!r}: {exc.strerror}") from None
     statuses: dict[str, int] = {}
     for r in records:
-        statuses[r["status"]] = statuses.get(r["status"], 0) + 1
-    over = sum(1 for r in records if (r.get("stats") or {}).get("over_budget"))
+        statuses[r.status] = statuses.get(r.status, 0) + 1
+    over = sum(1 for r in records if (r.stats or {}).get("over_budget"))
     return run_dir, ImportCounts(planner, len(records), statuses, over)
 
 
@@ -257,7 +258,7 @@ def _check_into(run_dir: Path, *, name: str, tier: str, planner: str) -> None:
         where = f"{run_ds['name']}:{run_ds.get('tier', 'all')}" if run_ds.get("name") else "generated scenes"
         raise SuiteError(f"--into {str(run_dir)!r} is a run on {where!r}, not on {name}:{tier}; import with "
                          f"--dataset {where} or into another run")
-    if any(r["planner"] == planner for r in read_trials(run_dir)):
+    if any(r.planner == planner for r in read_trials(run_dir)):
         raise SuiteError(f"--into {str(run_dir)!r} already has records of planner {planner!r}; import under another "
                          "--planner name")
 

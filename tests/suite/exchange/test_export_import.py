@@ -129,28 +129,28 @@ def test_import_of_the_suites_own_rrt_paths_reproduces_the_run_exactly(tmp_path,
         problem = quick.problems[i].with_(time_limit_s=30.0)
         run.append(run_trial(make_trial(problem, planner="rrt", planner_config={}, run_seed=0,
                                         meta=quick.meta[quick.ids[i]])))
-    assert {r["status"] for r in run} == {"success"}
-    lines = [{"problem_id": r["problem_id"], "status": r["status"], "path": r["path"],
-              "planning_time_s": r["planning_time_s"], "hardware": "this machine"} for r in run]
+    assert {r.status for r in run} == {"success"}
+    lines = [{"problem_id": r.problem_id, "status": r.status, "path": r.path,
+              "planning_time_s": r.planning_time_s, "hardware": "this machine"} for r in run]
     results = write_lines(tmp_path / "rrt.jsonl", lines)
     run_dir, counts = import_results(dataset=DATASET, results=results, planner="rrt", out=tmp_path / "imported")
-    records = {r["problem_id"]: r for r in read_trials(run_dir)}
+    records = {r.problem_id: r for r in read_trials(run_dir)}
     assert len(records) == len(quick.ids) and counts.statuses == {"success": 6, NO_RESULT: len(quick.ids) - 6}
     for old in run:
-        new = records[old["problem_id"]]
-        assert new["status"] == old["status"] and new["path"] == old["path"]
-        assert new["planning_time_s"] == old["planning_time_s"]
-        assert new["external"] is True and new["hardware"] == "this machine"
-        assert new["stats"]["reported_status"] == "success"
+        new = records[old.problem_id]
+        assert new.status == old.status and new.path == old.path
+        assert new.planning_time_s == old.planning_time_s
+        assert new.external is True and new.extra["hardware"] == "this machine"
+        assert new.stats["reported_status"] == "success"
         # the same exact verdict as the suite's own trial (times aside)
         same = ("verdict", "segments", "states", "distance_queries")
-        assert {k: new["certification"][k] for k in same} == {k: old["certification"][k] for k in same}
-        assert set(new["metrics"]) == set(old["metrics"])
-        for name, value in old["metrics"].items():
+        assert {k: new.certification[k] for k in same} == {k: old.certification[k] for k in same}
+        assert set(new.metrics) == set(old.metrics)
+        for name, value in old.metrics.items():
             if name not in NOT_OF_THE_PATH:
-                assert new["metrics"][name] == value, name  # exactly: the same function on the same path
-    missing = [r for r in records.values() if r["status"] == NO_RESULT]
-    assert missing and all(r["path"] is None and r["metrics"] == {} for r in missing)
+                assert new.metrics[name] == value, name  # exactly: the same function on the same path
+    missing = [r for r in records.values() if r.status == NO_RESULT]
+    assert missing and all(r.path is None and r.metrics == {} for r in missing)
     manifest = json.loads((run_dir / "manifest.json").read_text())
     assert manifest["dataset"]["name"] == "recycle-v1" and manifest["imports"][0]["lines"] == 6
 
@@ -163,17 +163,17 @@ def test_straight_lines_are_invalid_on_exactly_the_problems_whose_segment_collid
     records = read_trials(run_dir)
     trivial = {pid for pid in quick.ids if quick.meta[pid]["trivial"]}
     assert 0 < len(trivial) < len(quick.ids)
-    invalid = {r["problem_id"] for r in records if r["status"] == "invalid_solution"}
+    invalid = {r.problem_id for r in records if r.status == "invalid_solution"}
     assert invalid == set(quick.ids) - trivial
-    assert {r["problem_id"] for r in records if r["status"] == "success"} == trivial
+    assert {r.problem_id for r in records if r.status == "success"} == trivial
     # rejected claims get the exact verdict too: a straight line through an obstacle is a collision
-    assert all(r["certification"]["verdict"] == "collision" for r in records if r["status"] == "invalid_solution")
-    assert all(r["stats"]["invalid_reason"].startswith("collision at dense sample") for r in records
-               if r["status"] == "invalid_solution")
+    assert all(r.certification["verdict"] == "collision" for r in records if r.status == "invalid_solution")
+    assert all(r.stats["invalid_reason"].startswith("collision at dense sample") for r in records
+               if r.status == "invalid_solution")
     # --explain: where and how deeply the rejected ones collide
     from suite.exchange.explain import explain_rejections
 
-    some = [r for r in records if r["status"] == "invalid_solution"][:4]
+    some = [r for r in records if r.status == "invalid_solution"][:4]
     lines = explain_rejections(tmp_path / "straight.jsonl", DATASET, some)
     assert len(lines) == 5
     assert all("samples collide (" in ln and "mm into the scene" in ln for ln in lines[:4])
@@ -190,12 +190,12 @@ def test_paths_that_miss_an_end_or_a_limit_are_invalid_and_failures_keep_their_s
               {"problem_id": others[1], "status": "gave up", "path": None, "planning_time_s": 1.0}]
     run_dir, counts = import_results(dataset=DATASET, results=write_lines(tmp_path / "r.jsonl", lines),
                                      planner="ext", out=tmp_path / "run")
-    by_id = {r["problem_id"]: r for r in read_trials(run_dir)}
-    assert by_id[pid]["status"] == "invalid_solution"
-    assert by_id[pid]["stats"]["invalid_reason"] == "path does not end at q_goal"
-    assert by_id[pid]["stats"]["over_budget"] is True and counts.over_budget == 1
-    assert by_id[others[0]]["status"] == "timeout"
-    assert by_id[others[1]]["status"] == "no_solution" and by_id[others[1]]["stats"]["reported_status"] == "gave up"
+    by_id = {r.problem_id: r for r in read_trials(run_dir)}
+    assert by_id[pid].status == "invalid_solution"
+    assert by_id[pid].stats["invalid_reason"] == "path does not end at q_goal"
+    assert by_id[pid].stats["over_budget"] is True and counts.over_budget == 1
+    assert by_id[others[0]].status == "timeout"
+    assert by_id[others[1]].status == "no_solution" and by_id[others[1]].stats["reported_status"] == "gave up"
     assert NO_RESULT in STATUSES
 
 
@@ -255,7 +255,7 @@ def test_cli_export_and_import_into_an_existing_run(tmp_path, capsys, quick):
     assert main(["import", "--dataset", DATASET, "--results", results, "--planner", "second", "--into", str(run), "--no-plots"]) == 0
     capsys.readouterr()
     records = read_trials(run)
-    assert [r["planner"] for r in records].count("second") == len(quick.ids)
+    assert [r.planner for r in records].count("second") == len(quick.ids)
     assert "second" in (run / "summary.md").read_text()
     assert len(json.loads((run / "manifest.json").read_text())["imports"]) == 2
     # the same planner again, or a bad line: one error line, exit 2, nothing appended
@@ -335,11 +335,11 @@ def test_a_claim_over_the_judges_limit_is_invalid_fast_and_the_rest_of_the_file_
     assert "PEAK_KB" in proc.stdout, proc.stderr[-500:]
     peak_mb = int(proc.stdout.split("PEAK_KB")[-1].split()[0]) / 1024
     assert peak_mb < 1024
-    records = {r["problem_id"]: r for r in read_trials(tmp_path / "run")}
+    records = {r.problem_id: r for r in read_trials(tmp_path / "run")}
     r0 = records[pid0]
-    assert r0["status"] == "invalid_solution" and r0["stats"]["reason"] == "path_over_limit"
-    assert r0["stats"]["limit"] == {"limit": "checked_states", "value": 1 + 40001 * 81, "max": MAX_CHECKED_STATES}
-    assert records[pid1]["status"] in ("success", "invalid_solution") and "limit" not in records[pid1]["stats"]
+    assert r0.status == "invalid_solution" and r0.stats["reason"] == "path_over_limit"
+    assert r0.stats["limit"] == {"limit": "checked_states", "value": 1 + 40001 * 81, "max": MAX_CHECKED_STATES}
+    assert records[pid1].status in ("success", "invalid_solution") and "limit" not in records[pid1].stats
 
 
 def test_the_gcs_papers_dataset_exports_its_own_robot(tmp_path):
