@@ -14,11 +14,15 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from suite.cli.args import positive_int
 from suite.problems import DEFAULT_TIER
+
+if TYPE_CHECKING:
+    from suite.run.records import TrialRecord
 
 PLANNERS = ("ik", "trajopt")
 
@@ -31,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
-def _trial(problem, meta, planner: str) -> dict:
+def _trial(problem, meta, planner: str) -> TrialRecord:
     from planners.registry import planner_class
     from suite.run.trial import config_dict, make_config, make_trial, run_trial
 
@@ -40,8 +44,8 @@ def _trial(problem, meta, planner: str) -> dict:
                                 run_seed=0, meta=meta))
 
 
-def _drake(record: dict) -> dict | None:
-    return ((record.get("attribution") or {}).get("parts") or {}).get("drake")
+def _drake(record: TrialRecord) -> dict | None:
+    return ((record.attribution or {}).get("parts") or {}).get("drake")
 
 
 def measure(problems: list[tuple], planner: str) -> dict:
@@ -63,7 +67,7 @@ def measure(problems: list[tuple], planner: str) -> dict:
             continue  # no query, or (not expected) another run made other queries
         ratios.append(a["query_s"] / b["query_s"])
         queries.append(a["queries"])
-        shares.append(b["query_s"] / est["planning_time_s"])
+        shares.append(b["query_s"] / est.planning_time_s)
         per_query.append(b["query_s"] / b["queries"])
         replay_ms.append(1e3 * (sampled + 1) * b["query_s"] / b["queries"])
     q = (lambda v, p: float(np.quantile(v, p)) if len(v) else None)

@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from suite.cli.args import positive_float, positive_int
-from suite.run.records import SUCCESS
+from suite.run.records import TrialRecord
 
 TIMEOUTS = ("timeout", "killed_timeout")
 
@@ -40,13 +40,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the figures as JSON")
 
 
-def at_smaller_budget(records: list[dict], budget_s: float) -> list[dict]:
+def at_smaller_budget(records: list[TrialRecord], budget_s: float) -> list[TrialRecord]:
     """The records as they would read at a smaller budget: a success later than it is a timeout."""
     out = []
     for r in records:
-        r = dict(r, time_limit_s=budget_s)
-        if r.get("status") == SUCCESS and float(r.get("planning_time_s", 0.0)) > budget_s:
-            r["status"] = "timeout"
+        r = r.with_(time_limit_s=budget_s)
+        if r.succeeded and float(r.planning_time_s or 0.0) > budget_s:
+            r.status = "timeout"
         out.append(r)
     return out
 
@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     objective = tuning_objective(args.planner)
     candidates = grid(args.planner)
     _, problems = tuning_problems(dataset, per_family=per_family, time_limit_s=float(budget))
-    base: list[tuple[dict, list[dict]]] = []
+    base: list[tuple[dict, list[TrialRecord]]] = []
     for settings in candidates:
         trials = candidate_trials(args.planner, settings, problems, seed=0)
         d = _candidate_dir(tune_dir, settings)
@@ -105,11 +105,11 @@ def run(args: argparse.Namespace) -> int:
             if b <= float(budget):
                 evaluated.append((settings, at_smaller_budget(recs, b)))
                 continue
-            late = {r["problem_id"] for r in recs if r.get("status") in TIMEOUTS}
-            kept = [dict(r, time_limit_s=b) for r in recs if r["problem_id"] not in late]
+            late = {r.problem_id for r in recs if r.status in TIMEOUTS}
+            kept = [r.with_(time_limit_s=b) for r in recs if r.problem_id not in late]
             trials = candidate_trials(args.planner, settings, [(p.with_(time_limit_s=b), m) for p, m in problems
                                                                if m["problem_id"] in late], seed=0)
-            again: list[dict] = []
+            again: list[TrialRecord] = []
             if trials:
                 out = _candidate_dir(tune_dir, settings) / f"budget-{b:g}s"
                 out.mkdir(parents=True, exist_ok=True)

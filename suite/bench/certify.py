@@ -129,10 +129,10 @@ def _groups(args) -> dict[str, list[tuple]]:
         rebuild = RecordedProblems(records, read_manifest(args.run))
         for rec in records:
             path = joint_path(rec)
-            if rec.get("status") != "success" or path is None:
+            if not rec.succeeded or path is None:
                 continue
             try:
-                groups.setdefault(rec["planner"], []).append((rebuild.problem(rec), path))
+                groups.setdefault(rec.planner, []).append((rebuild.problem(rec), path))
             except Unrebuildable:
                 continue
     return groups

@@ -104,8 +104,8 @@ def run_figures(out: Path) -> dict[str, Any]:
     planners = planners_in(records)
     contention = run_contention(records)
     return {"run": str(out), "trials": len(records),
-            "solved": {p: sum(r["status"] == "success" for r in records if r["planner"] == p) for p in planners},
-            "problems": {p: sum(r["planner"] == p for r in records) for p in planners},
+            "solved": {p: sum(r.succeeded for r in records if r.planner == p) for p in planners},
+            "problems": {p: sum(r.planner == p for r in records) for p in planners},
             "contended": contention["contended"], "measured": contention["measured"],
             "run_contended": contention["run_contended"],
             "cpu_wait_share": contention["cpu_wait_share"], "load1": contention["load1"]}

@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
         from suite.exchange.explain import explain_rejections
         from suite.run.records import read_trials
 
-        mine = [r for r in read_trials(run_dir) if r["planner"] == args.planner]
+        mine = [r for r in read_trials(run_dir) if r.planner == args.planner]
         print("\n".join(explain_rejections(args.results, args.dataset, mine)))
     print(f"records in {run_dir}")
     return 0

@@ -29,11 +29,13 @@ def run(args: argparse.Namespace) -> int:
     out = []
     for problem in problems:
         rec = run_problem(problem, planner=args.planner, planner_config=config, run_seed=args.seed)
-        out.append({k: rec[k] for k in ("can_id", "problem", "status", "planning_time_s", "path", "metrics", "stats")})
+        out.append({"can_id": rec.can_id, "problem": rec.problem, "status": rec.status,
+                    "planning_time_s": rec.planning_time_s, "path": rec.path, "metrics": rec.metrics,
+                    "stats": rec.stats})
         if not args.json:
-            n = len(rec["path"]) if rec["path"] else 0
-            print(f"can {rec['can_id']} {rec['problem']:<8} {rec['status']:<16} "
-                  f"{rec['planning_time_s'] * 1e3:8.1f} ms  {n:4d} waypoints", file=sys.stdout)
+            n = len(rec.path) if rec.path else 0
+            print(f"can {rec.can_id} {rec.problem:<8} {rec.status:<16} "
+                  f"{rec.planning_time_s * 1e3:8.1f} ms  {n:4d} waypoints", file=sys.stdout)
     if args.json:
         print(json.dumps({"planner": args.planner, "seed": args.seed, "variant": scene.variant, "problems": out}))
     return 0

@@ -18,10 +18,14 @@ import itertools
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from scenes.errors import SuiteError
 from suite.cli.args import positive_float, positive_int
 from suite.problems import DEFAULT_DATASET
+
+if TYPE_CHECKING:
+    from suite.run.records import TrialRecord
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -84,12 +88,12 @@ def candidate_trials(planner: str, settings: dict, problems, *, seed: int) -> li
     return [make_trial(p, planner=planner, planner_config=config, run_seed=seed, meta=meta) for p, meta in problems]
 
 
-def recorded(run_dir: Path, trials) -> list[dict]:
+def recorded(run_dir: Path, trials) -> list[TrialRecord]:
     """The records in run_dir of these trials (a candidate's directory may hold others)."""
     from suite.run.records import read_trials
 
     wanted = {t.trial_id for t in trials}
-    return [r for r in read_trials(run_dir) if r["trial_id"] in wanted] if (run_dir / "trials.jsonl").is_file() else []
+    return [r for r in read_trials(run_dir) if r.trial_id in wanted] if (run_dir / "trials.jsonl").is_file() else []
 
 
 def _candidate_dir(out: Path, settings: dict) -> Path:
