@@ -264,10 +264,10 @@ def verdicts_with_our_robot(runs: list[tuple[Path, dict[str, str]]], labels: dic
     out: dict[str, dict[str, int]] = {}
     for d, rename in runs:
         for r in read_trials(d):
-            if r["status"] != "success" or not r.get("path") or r["problem_id"] not in problems:
+            if not r.succeeded or not r.path or r.problem_id not in problems:
                 continue
-            p = problems[r["problem_id"]]
-            cell = out.setdefault(rename.get(r["planner"], r["planner"]), {"successes": 0, "valid_with_ours": 0})
+            p = problems[r.problem_id]
+            cell = out.setdefault(rename.get(r.planner, r.planner), {"successes": 0, "valid_with_ours": 0})
             cell["successes"] += 1
-            cell["valid_with_ours"] += validate_path(p, np.asarray(r["path"], float), collision_world(p)) is None
+            cell["valid_with_ours"] += validate_path(p, np.asarray(r.path, float), collision_world(p)) is None
     return out

@@ -14,9 +14,12 @@ from __future__ import annotations
 import json
 import statistics
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from suite.run.records import TrialRecord
 
 #: The planners of the protocol: the paper's two (GCS; PRM, plain and shortcut) and the suite's.
 PLANNERS = ("gcs", "prm-roadmap", "prm-roadmap-shortcut", "rrt", "trajopt", "ik")
@@ -73,27 +76,27 @@ def aggregate(run_dirs: list[Path], labels: dict[str, str], *, rename: dict[str,
     a record's planner to the table's name (`gcs` on the paper's regions)."""
     from suite.run.records import read_trials
 
-    cells: dict[tuple[str, str], list[dict]] = {}
+    cells: dict[tuple[str, str], list[TrialRecord]] = {}
     for d in run_dirs:
         for r in read_trials(d):
-            name = (rename or {}).get(r["planner"], r["planner"])
-            cells.setdefault((labels.get(r["problem_id"], r["problem_id"]), name), []).append(r)
+            name = (rename or {}).get(r.planner, r.planner)
+            cells.setdefault((labels.get(r.problem_id, r.problem_id), name), []).append(r)
     out: dict[str, dict[str, Any]] = {}
     for (task, planner), recs in sorted(cells.items()):
-        ok = [r for r in recs if r["status"] == "success"]
-        solver = [float(r["stats"]["gcs_solve_s"]) for r in recs if (r.get("stats") or {}).get("gcs_solve_s") is not None]
-        first = [float(r["stats"]["first_solve_s"]) for r in recs if (r.get("stats") or {}).get("first_solve_s") is not None]
+        ok = [r for r in recs if r.succeeded]
+        solver = [float(r.stats["gcs_solve_s"]) for r in recs if (r.stats or {}).get("gcs_solve_s") is not None]
+        first = [float(r.stats["first_solve_s"]) for r in recs if (r.stats or {}).get("first_solve_s") is not None]
         out.setdefault(task, {})[planner] = {
             "runs": len(recs), "successes": len(ok),
-            "certified": sum((r.get("certification") or {}).get("verdict") == "certified" for r in ok),
-            "length_rad": _quartiles([float(r["metrics"]["path_length_rad"]) for r in ok]),
-            "time_s": _quartiles([float(r["planning_time_s"]) for r in recs if r.get("planning_time_s") is not None]),
+            "certified": sum((r.certification or {}).get("verdict") == "certified" for r in ok),
+            "length_rad": _quartiles([float(r.metrics["path_length_rad"]) for r in ok]),
+            "time_s": _quartiles([float(r.planning_time_s) for r in recs if r.planning_time_s is not None]),
             "solver_s": _quartiles(solver),
             "first_solve_s": _quartiles(first),
-            "repairs": sum(int((r.get("stats") or {}).get("repairs", 0)) for r in recs),
-            "num_regions": sorted({r["stats"]["num_regions"] for r in recs if (r.get("stats") or {}).get("num_regions")}),
-            "offline_s": next((r["stats"].get("offline_s") for r in recs if (r.get("stats") or {}).get("offline_s")), None),
-            "failures": sorted({str(r.get("reason_code")) for r in recs if r["status"] != "success"}),
+            "repairs": sum(int((r.stats or {}).get("repairs", 0)) for r in recs),
+            "num_regions": sorted({r.stats["num_regions"] for r in recs if (r.stats or {}).get("num_regions")}),
+            "offline_s": next((r.stats.get("offline_s") for r in recs if (r.stats or {}).get("offline_s")), None),
+            "failures": sorted({str(r.reason_code) for r in recs if not r.succeeded}),
         }
     return out
 
@@ -290,7 +293,7 @@ def plot_paths(runs: list[tuple[Path, dict[str, str]]], labels: dict[str, str], 
 
     scene = paper_scene()
     robot = load_robot(scene.spec.robot)
-    recs = [{**r, "planner": rename.get(r["planner"], r["planner"])} for d, rename in runs for r in read_trials(d)]
+    recs = [r.with_(planner=rename.get(r.planner, r.planner)) for d, rename in runs for r in read_trials(d)]
     fig, axes = plt.subplots(1, 2, figsize=(13, 6.6))
     for ax, dims in zip(axes, ((0, 1), (1, 2))):
         for o in scene_outlines(scene.spec, (), dims=dims):  # the world has no plate (no can station)
@@ -300,11 +303,11 @@ def plot_paths(runs: list[tuple[Path, dict[str, str]]], labels: dict[str, str], 
     for k, (a, b) in enumerate(TASKS):
         label = task_label(a, b)
         for planner in planners:
-            r = next((r for r in recs if labels.get(r["problem_id"]) == label and r["planner"] == planner
-                      and r["status"] == "success" and r.get("path")), None)
+            r = next((r for r in recs if labels.get(r.problem_id) == label and r.planner == planner
+                      and r.succeeded and r.path), None)
             if r is None:
                 continue
-            p = robot.gripper_pose(densify_joint_path(np.asarray(r["path"], float)))[:, :3, 3]
+            p = robot.gripper_pose(densify_joint_path(np.asarray(r.path, float)))[:, :3, 3]
             for ax, (i, j) in zip(axes, ((0, 1), (1, 2))):
                 ax.plot(p[:, i], p[:, j], styles[planner], color=colors(k), linewidth=1.8 if styles[planner] == ":" else 1.4,
                         label=f"{label} {planner}" if ax is axes[0] else None)

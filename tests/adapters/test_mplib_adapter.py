@@ -111,11 +111,11 @@ def test_both_modes_plan_from_the_export_alone_and_their_results_import(exported
         lines = {json.loads(line)["problem_id"]: json.loads(line) for line in results.read_text().splitlines()}
         assert set(lines) == {trivial, hard}
         run, counts = import_results(dataset=DATASET, results=results, planner=mode, out=tmp_path / f"run-{mode}")
-        by_id = {r["problem_id"]: r for r in read_trials(run)}
-        assert by_id[trivial]["status"] == "success" and by_id[trivial]["external"] is True
+        by_id = {r.problem_id: r for r in read_trials(run)}
+        assert by_id[trivial].status == "success" and by_id[trivial].external is True
         assert counts.statuses["no_result"] == len(ds.ids) - 2
         if mode == "mplib":
-            assert by_id[hard]["status"] in ("success", "invalid_solution", "timeout")
+            assert by_id[hard].status in ("success", "invalid_solution", "timeout")
         else:  # a path that passed mplib's own check at the validator's rule passes the validator
-            assert by_id[hard]["status"] in ("success", "timeout")
+            assert by_id[hard].status in ("success", "timeout")
             assert "OUR wrapper" in lines[hard]["notes"]

@@ -48,7 +48,7 @@ def test_the_adapter_plans_from_the_export_alone_and_its_results_import(tmp_path
     lines = [json.loads(line) for line in results.read_text().splitlines()]
     assert {ln["problem_id"] for ln in lines} == {trivial, hard}
     run, counts = import_results(dataset=DATASET, results=results, planner="pyroboplan", out=tmp_path / "run")
-    by_id = {r["problem_id"]: r for r in read_trials(run)}
-    assert by_id[trivial]["status"] == "success" and by_id[trivial]["external"] is True
-    assert by_id[hard]["status"] in ("success", "invalid_solution", "timeout")
+    by_id = {r.problem_id: r for r in read_trials(run)}
+    assert by_id[trivial].status == "success" and by_id[trivial].external is True
+    assert by_id[hard].status in ("success", "invalid_solution", "timeout")
     assert counts.statuses["no_result"] == len(ds.ids) - 2

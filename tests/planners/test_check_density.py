@@ -139,7 +139,7 @@ def test_roboplan_records_its_computed_samples_per_edge(window_problem):
 
     rec = run_problem(window_problem.with_(time_limit_s=30.0), planner="roboplan-rrt",
                       planner_config={"range_rad": 1.0, "collision_check_step_rad": 0.05}, run_seed=0)
-    s = rec["stats"]
+    s = rec.stats
     assert (s["resolution_rad"], s["resolution_norm"], s["samples_per_edge_from"]) == (0.05, "l2", "computed")
     assert s["post_processing"] == "PathShortcutter(100)"
     assert s["tree_edges"] == s["graph_vertices"] - 2  # every node but the two roots has its edge

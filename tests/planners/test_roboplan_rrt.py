@@ -75,12 +75,12 @@ def test_solves_dataset_problems_and_the_validator_accepts(quick, family, kind):
     pid, problem = _first(quick, family=family, kind=kind)
     # a budget with a wide margin: what is tested is the success, not how fast it comes
     rec = run_problem(problem.with_(time_limit_s=60.0), planner="roboplan-rrt", planner_config={}, run_seed=0)
-    assert rec["status"] == "success", rec["stats"]  # success after the suite's validator and TOPP-RA
-    assert rec["stats"].get("invalid_reason") is None
-    path = np.asarray(rec["path"])
+    assert rec.status == "success", rec.stats  # success after the suite's validator and TOPP-RA
+    assert rec.stats.get("invalid_reason") is None
+    path = np.asarray(rec.path)
     assert np.allclose(path[0], problem.q_start, atol=1e-9) and np.allclose(path[-1], problem.q_goal, atol=1e-9)
-    assert rec["planner_config"] == {} and rec["stats"]["resolution_rad"] == 0.01
-    part = rec["attribution"]["parts"]["roboplan"]
+    assert rec.planner_config == {} and rec.stats["resolution_rad"] == 0.01
+    part = rec.attribution["parts"]["roboplan"]
     assert part["queries"] > 0 and part["timing"] == "lower_bound"
 
 

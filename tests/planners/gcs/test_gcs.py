@@ -38,17 +38,17 @@ def built(open_transit, tmp_path_factory):
 
 def test_path_passes_the_validator_and_offline_time_is_recorded_apart(built, open_transit):
     record, cache, grown = built
-    assert record["status"] == "success", record["stats"]
-    path = np.asarray(record["path"])
+    assert record.status == "success", record.stats
+    path = np.asarray(record.path)
     assert validate_path(open_transit, path, collision_world(open_transit)) is None
-    s = record["stats"]
+    s = record.stats
     assert s["solver"] == "Clarabel" and s["iris"] == "zo"
     assert s["regions_cache"] == "built" and s["num_regions"] == grown >= 1
     # Building regions is offline: recorded as offline_s and in the set-up time, not in planning.
     assert s["offline_s"] > 0
-    assert record["setup_time_s"] >= s["offline_s"] > record["planning_time_s"] - s["solve_time_s"]
+    assert record.setup_time_s >= s["offline_s"] > record.planning_time_s - s["solve_time_s"]
     assert len(list(cache.glob("*.npz"))) == 1
-    assert record["metrics"]["length_over_straight"] >= 1.0 - 1e-9
+    assert record.metrics["length_over_straight"] >= 1.0 - 1e-9
 
 
 def test_second_prepare_reuses_the_cache(built, open_transit):
@@ -59,8 +59,8 @@ def test_second_prepare_reuses_the_cache(built, open_transit):
     r = planner.plan(open_transit.with_(time_limit_s=ROOMY_S))
     assert iris.GROWN_IN_PROCESS == before
     assert r.status is PlanStatus.SUCCESS and r.stats["regions_cache"] == "hit"
-    assert r.stats["offline_s"] == pytest.approx(record["stats"]["offline_s"])
-    assert r.stats["world_hash"] == record["stats"]["world_hash"]
+    assert r.stats["offline_s"] == pytest.approx(record.stats["offline_s"])
+    assert r.stats["world_hash"] == record.stats["world_hash"]
 
 
 def test_a_different_world_misses_the_cache(built, open_transit):
@@ -103,9 +103,9 @@ def test_an_invalid_region_gives_a_path_the_validator_rejects(wall_transit, tmp_
     record = run_problem(wall_transit.with_(time_limit_s=ROOMY_S), planner="gcs",
                          planner_config={**FAST, "regions_dir": str(tmp_path), "build_regions": False,
                                          "max_repairs": 0}, run_seed=0)
-    assert record["stats"]["num_regions"] == 1 and record["stats"]["regions_cache"] == "hit"
-    assert record["status"] == "invalid_solution"
-    assert "collision" in record["stats"]["invalid_reason"]
+    assert record.stats["num_regions"] == 1 and record.stats["regions_cache"] == "hit"
+    assert record.status == "invalid_solution"
+    assert "collision" in record.stats["invalid_reason"]
 
 
 def test_with_repairs_on_a_colliding_path_is_not_returned(wall_transit, tmp_path):

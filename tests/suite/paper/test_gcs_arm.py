@@ -59,16 +59,16 @@ def test_compare_runs_the_gcs_arm_dataset_and_judges_it(tmp_path):
     assert main(["compare", "--dataset", "gcs-arm:tasks", "--planners", "rrt,gcs", "--out", str(out),
                  "--no-progress", "--jobs", "2"]) == 0
     recs = read_trials(out)
-    assert len(recs) == 10 and {r["planner"] for r in recs} == {"rrt", "gcs"}
-    assert {r["family"] for r in recs} == {"gcs-arm"}
+    assert len(recs) == 10 and {r.planner for r in recs} == {"rrt", "gcs"}
+    assert {r.family for r in recs} == {"gcs-arm"}
     for r in recs:
-        if r["status"] == "success":
-            assert r["certification"]["verdict"] in ("certified", "collision", "unproved")
+        if r.status == "success":
+            assert r.certification["verdict"] in ("certified", "collision", "unproved")
         else:
-            assert r["reason_code"]
-    gcs = [r for r in recs if r["planner"] == "gcs"]
-    assert all(r["stats"].get("regions_cache") in ("hit", None) for r in gcs)  # never built inside a trial
-    assert sum(r["status"] == "success" for r in recs if r["planner"] == "rrt") >= 1
+            assert r.reason_code
+    gcs = [r for r in recs if r.planner == "gcs"]
+    assert all(r.stats.get("regions_cache") in ("hit", None) for r in gcs)  # never built inside a trial
+    assert sum(r.status == "success" for r in recs if r.planner == "rrt") >= 1
 
 
 def test_finding_3_does_not_hold_where_an_optimum_collides():
@@ -117,7 +117,7 @@ def test_a_protocol_run_writes_what_compare_writes_and_resumes(tmp_path):
     manifests = [json.loads((d / "manifest.json").read_text()) for d in (api, cli)]
     assert manifests[0].keys() == manifests[1].keys() and manifests[0]["config"] == manifests[1]["config"]
     assert manifests[0]["status"] == "complete" and manifests[0]["trials_recorded"] == 5
-    assert sorted(r["trial_id"] for r in read_trials(api)) == sorted(r["trial_id"] for r in read_trials(cli))
+    assert sorted(r.trial_id for r in read_trials(api)) == sorted(r.trial_id for r in read_trials(cli))
     lines = (api / "trials.jsonl").read_text()
     comparison_run(api, seed=0, **run)  # resumed: every trial is recorded already
     assert (api / "trials.jsonl").read_text() == lines

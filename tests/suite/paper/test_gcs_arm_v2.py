@@ -59,12 +59,12 @@ def test_compare_plans_the_free_transits_and_names_their_tasks(tmp_path):
     assert main(["compare", "--dataset", "gcs-arm-v2:tasks", "--planners", "rrt,gcs", "--time-limit-s", "1",
                  "--out", str(out), "--no-progress", "--jobs", "2"]) == 0
     recs = read_trials(out)
-    assert len(recs) == 10 and {r["problem"] for r in recs} == {"free"} and {r["can_id"] for r in recs} == {None}
-    rrt = [r for r in recs if r["planner"] == "rrt"]
-    assert sorted(r["task_index"] for r in rrt) == [0, 1, 2, 3, 4]
-    assert len({r["trial_id"] for r in recs}) == 10 and len({r["seed"] for r in rrt}) == 5
+    assert len(recs) == 10 and {r.problem for r in recs} == {"free"} and {r.can_id for r in recs} == {None}
+    rrt = [r for r in recs if r.planner == "rrt"]
+    assert sorted(r.task_index for r in rrt) == [0, 1, 2, 3, 4]
+    assert len({r.trial_id for r in recs}) == 10 and len({r.seed for r in rrt}) == 5
     # the regions shipped with the dataset: never built inside a trial
-    caches = [r["stats"].get("regions_cache") for r in recs if r["planner"] == "gcs"]
+    caches = [r.stats.get("regions_cache") for r in recs if r.planner == "gcs"]
     assert set(caches) <= {"hit", None} and "hit" in caches
     page = (out / "report.html").read_text()
     assert "task 0" in page
