@@ -11,8 +11,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import datetime as dt
-import multiprocessing
-import os
 import sys
 import time
 from pathlib import Path
@@ -23,8 +21,8 @@ from suite.cli.args import nonneg_int, positive_float, positive_int
 from scenes.errors import SuiteError
 from scenes.schema import load
 from suite.problems import DEFAULT_TIER
-from suite.run.lock import RunLock
-from suite.run.runner import TRIALS_FILE, CompareConfig, check_planner_configs, recorded_counts
+from suite.run.comparison import HOW_IT_RUNS
+from suite.run.runner import TRIALS_FILE, CompareConfig, check_planner_configs
 
 RESULTS_DIR = Path("results")
 #: Flags that describe generated scenes (they cannot be combined with --dataset).
@@ -33,8 +31,6 @@ GENERATED_FLAGS = ("variant", "scenes", "cans", "grasps", "world")
 #: read apart: a list, and the choice between stored and generated problems).
 FLAG_SETTINGS = tuple(f.name for f in dataclasses.fields(CompareConfig)
                       if f.name not in ("planners", "dataset", "planner_configs", "hard_limit_grace_s"))
-#: Settings of how a run executes, which a resumed run may change (its records do not depend on them).
-HOW_IT_RUNS = ("jobs", "executor", "scheduler", "memory_limit_mb")
 #: The problems a --moving-bin run plans when no scenes are named: the default tier's open and wall.
 DEFAULT_TIER_MOVING = f"{DEFAULT_TIER}:family=open+wall"
 
@@ -284,38 +280,19 @@ def _resumed_settings(out: Path, values: dict, given: dict[str, tuple[str, objec
     return resumed
 
 
-def prepare_out(args: argparse.Namespace) -> tuple[Path, RunLock]:
-    """The run directory, created, locked for this run alone and checked writable; with --resume
-    it must hold a run, without it it must not.
-
-    The lock is taken before the directory's contents are checked, so of two runs started into
-    the same directory at once, one fails (naming the other's PID) before it writes anything.
-    """
+def run_dir(args: argparse.Namespace) -> Path:
+    """The run directory: --out, or with --resume the interrupted run's (it must name one), else a
+    new one under results/ named by the time. What it holds is checked once it is locked
+    (`suite.run.comparison.run_comparison`)."""
     if args.resume:
         if not args.out:
             raise SuiteError("--resume needs --out naming the interrupted run's directory")
         out = Path(args.out)
         if not out.is_dir():
             raise SuiteError(f"--resume: {str(out)!r} holds no {TRIALS_FILE} to resume")
-    else:
-        stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-        out = Path(args.out) if args.out else RESULTS_DIR / stamp
-    lock = RunLock(out).acquire()
-    try:
-        if args.resume and not (out / TRIALS_FILE).exists():
-            raise SuiteError(f"--resume: {str(out)!r} holds no {TRIALS_FILE} to resume")
-        if not args.resume and (out / TRIALS_FILE).exists():
-            raise SuiteError(f"--out {str(out)!r} already holds a run; use --resume to continue it or another --out")
-        try:
-            probe = out / ".write-test"
-            probe.write_text("")
-            probe.unlink()
-        except OSError as exc:
-            raise SuiteError(f"--out {str(out)!r} is not writable: {exc.strerror}") from None
-    except BaseException:
-        lock.release()
-        raise
-    return out, lock
+        return out
+    stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    return Path(args.out) if args.out else RESULTS_DIR / stamp
 
 
 def resume_command(out: Path) -> str:
@@ -326,98 +303,36 @@ def resume_command(out: Path) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from suite.run.interrupt import Interrupted, SignalGuard, reap_children
-    from suite.run.journal import RecordWriteError
-    from suite.run.manifest import update_manifest
+    from suite.run.comparison import run_comparison
+    from suite.run.interrupt import Interrupted
+    from suite.run.manifest import read_run_manifest
 
     config = resolve_config(args)
     scenario = moving_bin_scenario(args, config) if getattr(args, "moving_bin", None) else None
-    before = frozenset(c.pid for c in multiprocessing.active_children())
-    with SignalGuard():
-        out, lock = prepare_out(args)
-        try:
-            return _run_locked(args, config, out, scenario=scenario)
-        except Interrupted as exc:
-            counts = recorded_counts(out, total=_TOTAL_TRIALS.get(str(out)))
-            update_manifest(out, status="interrupted", interrupted_by=exc.name, stopped_utc=_now(), **counts)
-            print(f"interrupted by {exc.name}: {counts['trials_recorded']} trial(s) recorded in {out} are kept; "
-                  f"resume with: {resume_command(out)}", file=sys.stderr)
-            return exc.exit_code
-        except RecordWriteError as exc:
-            counts = recorded_counts(out, total=_TOTAL_TRIALS.get(str(out)))
-            update_manifest(out, status="stopped", stop_reason=str(exc), stopped_utc=_now(), **counts)
-            raise SuiteError(f"{exc}; the run stopped with {counts['trials_recorded']} trial(s) kept; once the cause "
-                             f"is fixed, resume with: {resume_command(out)}") from None
-        finally:
-            reap_children(keep=before)  # no worker outlives the run, however it ended
-            lock.release()
-
-
-def _now() -> str:
-    return dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
-
-
-#: The trial count of the run in progress (for the manifest of an interrupted run).
-_TOTAL_TRIALS: dict[str, int] = {}
-
-
-def _run_locked(args: argparse.Namespace, config: CompareConfig, out: Path, *, scenario=None) -> int:
-    """The run, with `out` locked: manifest, problems, trials, execution, report."""
-    from suite.run.executors import cap_workers
-    from suite.run.manifest import update_manifest, write_manifest
-    from suite.run.runner import make_executor, prepare_trials, recorded_trial_ids, run_trials
-
-    from planners.worlds import CHECKER_ENV
-
-    os.environ[CHECKER_ENV] = config.checker  # the workers (spawned from here) inherit it
+    out = run_dir(args)
     t0 = time.perf_counter()
-    print(f"run directory: {out}", file=sys.stderr)
-    if args.resume:
-        update_manifest(out, status="running", resumed_utc=_now())
-    else:
-        write_manifest(out, config, argv=sys.argv[1:])
-        (out / TRIALS_FILE).touch()  # the directory now holds a run, even before its first record
-    if config.dataset:
-        print(f"loading dataset {config.dataset}...", file=sys.stderr)
-        trials = prepare_trials(config)  # fast (no IK): the pending count caps the workers
-        done = recorded_trial_ids(out / TRIALS_FILE)
-        n_workers = cap_workers(config.jobs, sum(t.trial_id not in done for t in trials))
-        executor = make_executor(config.executor, jobs=n_workers, scheduler=config.scheduler,
-                                 memory_limit_mb=config.memory_limit_mb)
-    else:
-        print(f"preparing {config.scenes} {config.variant} scene(s) of {config.cans} cans "
-              f"({config.grasps} grasps)...", file=sys.stderr)
-        # at most 5 problems per can and planner: no more workers than that, even before they are known
-        bound = config.scenes * config.cans * 5 * len(config.planners)
-        executor = make_executor(config.executor, jobs=min(config.jobs, bound), scheduler=config.scheduler,
-                                 memory_limit_mb=config.memory_limit_mb)
-        if hasattr(executor, "start"):
-            executor.start()  # the workers import Drake and OMPL while the scenes are prepared
-        try:
-            trials = prepare_trials(config)
-        except BaseException:
-            if hasattr(executor, "abort"):
-                executor.abort()
-            raise
-    _TOTAL_TRIALS[str(out)] = len(trials)
-    if scenario is not None and not any(t.problem.scene.variant in ("open", "wall") for t in trials):
+    try:
+        return run_comparison(config, out=out, command=sys.argv[1:], resume=args.resume,
+                              progress_bar=not args.no_progress, resume_hint=resume_command(out),
+                              check_trials=None if scenario is None else _moving_bin_trials,
+                              then=lambda done: _execute_and_report(args, done, scenario=scenario, t0=t0))
+    except Interrupted as exc:
+        kept = (read_run_manifest(out) or {}).get("trials_recorded")
+        print(f"interrupted by {exc.name}: {kept} trial(s) recorded in {out} are kept; "
+              f"resume with: {resume_command(out)}", file=sys.stderr)
+        return exc.exit_code
+
+
+def _moving_bin_trials(trials) -> None:
+    if not any(t.problem.scene.variant in ("open", "wall") for t in trials):
         raise SuiteError("--moving-bin runs on open and wall scenes; this run has none (select them, e.g. "
                          f"--dataset {DEFAULT_TIER_MOVING}, or --variant open)")
-    from suite.run.contention import machine_across, machine_sample, run_contention
-    from suite.run.records import read_trials
 
-    machine0 = machine_sample()
-    counts = run_trials(trials, out=out, jobs=config.jobs, executor=executor,
-                        scheduler=config.scheduler, progress_bar=not args.no_progress,
-                        hard_limit_grace_s=config.hard_limit_grace_s)
-    contention = run_contention(read_trials(out / TRIALS_FILE), machine=machine_across(machine0))
-    update_manifest(out, status="complete", finished_utc=_now(),
-                    trials_recorded=counts["skipped"] + counts["ran"], trials_total=counts["total"],
-                    contention=contention)
-    if contention["run_contended"]:
-        print(f"warning: the machine was contended: {contention['contended']} of {contention['measured']} trial(s) "
-              f"waited for a CPU (or lost it to steal), {100 * (contention['cpu_wait_share'] or 0):.0f}% of the "
-              "planning wall time in all; summary.md names them", file=sys.stderr)
+
+def _execute_and_report(args: argparse.Namespace, done, *, scenario, t0: float) -> int:
+    """After the trials, with the run directory still locked: execution in physics if asked, then
+    the report (summary, plots, report.html)."""
+    trials, out, config, counts = done.trials, done.out, done.config, done.counts
     if scenario is not None:
         from suite.execution.run_plans import execute_moving_bin
 

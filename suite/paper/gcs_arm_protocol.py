@@ -155,8 +155,7 @@ def comparison_run(run_dir: Path, *, settings: Path, planners: list[str], datase
               "seed": seed, "jobs": jobs, "time_limit_s": float(time_limit_s)}
     config = load(CompareConfig, values, where=f"{settings}: ")
     run_comparison(config, out=run_dir, command=sys.argv[1:], resume=(run_dir / TRIALS_FILE).exists(),
-                   progress_bar=progress)
-    write_report(run_dir)
+                   progress_bar=progress, then=lambda done: write_report(done.out))
 
 
 def run_protocol(out: Path, *, dataset: str = "gcs-arm", runs: int = 10, time_limit_s: float = 5.0,

@@ -24,6 +24,7 @@ from suite.cli import main
 from suite.problems.dataset import DATASETS_DIR, load_dataset
 from suite.run.executors import Job, LocalExecutor
 from suite.run.journal import RecordWriteError, TrialsJournal
+from suite.run.records import TrialRecord
 from suite.run.lock import RunLock
 from suite.run.records import read_manifest, read_trials
 from suite.run.runner import (
@@ -120,13 +121,18 @@ def test_full_disk_stops_the_run_keeps_whole_records_and_resume_completes(ik_tri
     assert sorted(_ids(out / TRIALS_FILE)) == sorted(t.trial_id for t in ik_trials)  # none lost, none doubled
 
 
+def _record(trial_id: str) -> TrialRecord:
+    return TrialRecord(planner="ik", status="success", problem="lift", scene_seed=0, variant="open", can_id=0,
+                       trial_id=trial_id)
+
+
 def test_removed_trials_file_is_reported_at_the_next_append(tmp_path):
     path = tmp_path / TRIALS_FILE
     with TrialsJournal(path) as j:
-        j.append({"trial_id": "a"})
+        j.append(_record("a"))
         path.unlink()
         with pytest.raises(RecordWriteError, match=rf"cannot append to {path}: the file was removed during the run"):
-            j.append({"trial_id": "b"})
+            j.append(_record("b"))
 
 
 def test_unwritable_trials_file_is_one_error(tmp_path):
@@ -161,8 +167,8 @@ def test_runaway_memory_is_a_crash_record_and_the_run_goes_on(ik_trials, tmp_pat
     assert counts["ran"] == 10
     recs = {(r.planner, r.problem): r for r in read_trials(out)}
     oom = recs[("hungry", "descend")]
-    assert oom.status == "crash" and oom["stats"]["reason"] == "out_of_memory"
-    assert oom["stats"]["memory_limit_mb"] == 2048
+    assert oom.status == "crash" and oom.stats["reason"] == "out_of_memory"
+    assert oom.stats["memory_limit_mb"] == 2048
     assert all(recs[("ik", k)].status == "success" for k in ("approach", "descend", "lift"))
     assert recs[("hungry", "lift")].status == "no_solution"  # the next trial ran in a fresh worker
 

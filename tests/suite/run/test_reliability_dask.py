@@ -54,7 +54,7 @@ def test_lost_worker_trial_retried_once_or_crash_nothing_lost_or_doubled(tmp_pat
     assert by[("workerkiller", "transit")].status == "no_solution"  # retried once, elsewhere
     lift = by[("workerkiller", "lift")]
     if kill_always:
-        assert lift.status == "crash" and "Dask worker died" in lift["stats"]["error"]
+        assert lift.status == "crash" and "Dask worker died" in lift.stats["error"]
     else:
         assert lift.status == "no_solution"
     assert all(by[("ik", k)].status == "success" for k in ("approach", "descend", "lift"))
