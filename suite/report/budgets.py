@@ -18,28 +18,28 @@ from tabulate import tabulate
 
 from suite.report.outcomes import family_of, outcomes, solved_count, wilson_interval
 from suite.report.plots_common import planner_colors, plt, save_figure
-from suite.run.records import metric
+from suite.run.records import TrialRecord, metric
 
 
-def budgets_in(records: Sequence[dict[str, Any]]) -> list[float]:
+def budgets_in(records: Sequence[TrialRecord]) -> list[float]:
     """The distinct budgets (time_limit_s) of the records, ascending."""
-    return sorted({float(r["time_limit_s"]) for r in records if r.get("time_limit_s") is not None})
+    return sorted({float(r.time_limit_s) for r in records if r.time_limit_s is not None})
 
 
 def budget_label(planner: str, budget_s: float) -> str:
     return f"{planner}@{budget_s:g}s"
 
 
-def by_budget_view(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+def by_budget_view(records: Sequence[TrialRecord]) -> list[TrialRecord]:
     """The records with each planner renamed PLANNER@Bs when the run holds several budgets (else as is)."""
     if len(budgets_in(records)) < 2:
         return list(records)
-    return [{**r, "planner": budget_label(str(r["planner"]), float(r["time_limit_s"]))} for r in records]
+    return [r.with_(planner=budget_label(str(r.planner), float(r.time_limit_s))) for r in records]
 
 
 def _cell(records: Sequence[dict], planner: str, budget: float, family: str | None,
           metric: str = "length_ratio"):
-    mine = [r for r in records if r["planner"] == planner and float(r["time_limit_s"]) == budget
+    mine = [r for r in records if r.planner == planner and float(r.time_limit_s) == budget
             and (family is None or family_of(r) == family)]
     oc = list(outcomes(mine, metrics=(metric,)).values())
     ratios = np.array([o.metrics[metric] for o in oc], float)
@@ -47,13 +47,13 @@ def _cell(records: Sequence[dict], planner: str, budget: float, family: str | No
     return solved_count(oc), len(oc), ratios
 
 
-def budget_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str], tablefmt: str = "github") -> str:
+def budget_table(records: Sequence[TrialRecord], *, planners: Sequence[str], tablefmt: str = "github") -> str:
     """Success (with its Wilson interval) and median length ratio of every planner at every budget,
     over all families and per family."""
     families = [None, *sorted({family_of(r) for r in records})]
     rows = []
     for p in planners:
-        for b in budgets_in([r for r in records if r["planner"] == p]):
+        for b in budgets_in([r for r in records if r.planner == p]):
             row = [p, f"{b:g}"]
             for fam in families:
                 k, n, ratios = _cell(records, p, b, fam)
@@ -68,7 +68,7 @@ def budget_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str], 
     return tabulate(rows, headers=headers, tablefmt=tablefmt)
 
 
-def plot_budget_curves(records: Sequence[dict[str, Any]], *, planners: Sequence[str], path) -> Any:
+def plot_budget_curves(records: Sequence[TrialRecord], *, planners: Sequence[str], path) -> Any:
     """Success rate (with its 95% Wilson band) and median length ratio (with its quartiles) of each
     planner against the planning budget, log budget axis."""
     colors = planner_colors(planners)
@@ -77,7 +77,7 @@ def plot_budget_curves(records: Sequence[dict[str, Any]], *, planners: Sequence[
     name = "length_ratio" if has_ratio else "path_length_rad"
     fig, (ax_s, ax_l) = plt.subplots(1, 2, figsize=(12, 4.6))
     for p in planners:
-        budgets = budgets_in([r for r in records if r["planner"] == p])
+        budgets = budgets_in([r for r in records if r.planner == p])
         rates, lows, highs, med, q1, q3 = [], [], [], [], [], []
         for b in budgets:
             k, n, ratios = _cell(records, p, b, None, name)

@@ -9,7 +9,14 @@ from typing import Any
 
 from tabulate import tabulate
 
-from suite.run.contention import RULE, WAIT_SHARE, median_or_none, record_contended, run_contention
+from suite.run.contention import (
+    RULE,
+    WAIT_SHARE,
+    median_or_none,
+    record_contended,
+    run_contention,
+)
+from suite.run.records import TrialRecord
 
 #: How many contended trials a warning names before it counts the rest.
 NAMED_TRIALS = 10
@@ -21,17 +28,17 @@ CONTENTION_INTRO = (
     "single-threaded planner that had its core, lower when it waited).")
 
 
-def budget_clocks(records: Sequence[dict[str, Any]]) -> list[str]:
+def budget_clocks(records: Sequence[TrialRecord]) -> list[str]:
     """The budget clocks of a run's records ("wall" for records from before budgets had clocks)."""
-    return sorted({str(r.get("budget_clock", "wall")) for r in records})
+    return sorted({str(r.budget_clock or "wall") for r in records})
 
 
-def contended_ids(records: Sequence[dict[str, Any]]) -> list[str]:
+def contended_ids(records: Sequence[TrialRecord]) -> list[str]:
     """The trial ids of the contended records, in file order."""
-    return [str(r.get("trial_id")) for r in records if record_contended(r)]
+    return [str(r.trial_id) for r in records if record_contended(r)]
 
 
-def contention_warning(records: Sequence[dict[str, Any]]) -> str | None:
+def contention_warning(records: Sequence[TrialRecord]) -> str | None:
     """One paragraph for the top of summary.md when the run was contended (None otherwise): how many
     trials, which (the first NAMED_TRIALS ids, then a count), the planners whose trials together
     waited, and what that means for the run's clock."""
@@ -56,19 +63,19 @@ def contention_warning(records: Sequence[dict[str, Any]]) -> str | None:
     return " ".join(parts) + f" Rule: {RULE}."
 
 
-def contention_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def contention_rows(records: Sequence[TrialRecord], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     """Per planner: trials measured and contended, median CPU / wall, share of planning wall time spent
     waiting for a CPU, median load average."""
     headers = ["planner", "trials measured", "contended", "median CPU / wall", "CPU wait / wall time",
                "median load (1 min)"]
     rows = []
     for p in planners:
-        mine = [r for r in records if r.get("planner") == p and record_contended(r) is not None]
-        ratios = [r["planning_cpu_time_s"] / r["planning_time_s"] for r in mine
-                  if isinstance(r.get("planning_cpu_time_s"), (int, float)) and r.get("planning_time_s")]
-        waits = [(r["contention"].get("cpu_wait_s"), r["planning_time_s"]) for r in mine]
+        mine = [r for r in records if r.planner == p and record_contended(r) is not None]
+        ratios = [r.planning_cpu_time_s / r.planning_time_s for r in mine
+                  if isinstance(r.planning_cpu_time_s, (int, float)) and r.planning_time_s]
+        waits = [(r.contention.get("cpu_wait_s"), r.planning_time_s) for r in mine]
         waits = [(w, t) for w, t in waits if isinstance(w, (int, float)) and isinstance(t, (int, float))]
-        loads = [r["contention"]["load1"] for r in mine if isinstance(r["contention"].get("load1"), (int, float))]
+        loads = [r.contention["load1"] for r in mine if isinstance(r.contention.get("load1"), (int, float))]
         wall = sum(t for _, t in waits)
         ratio, load = median_or_none(ratios), median_or_none(loads)
         rows.append([p, len(mine), sum(bool(record_contended(r)) for r in mine),
@@ -78,7 +85,7 @@ def contention_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) 
     return headers, rows
 
 
-def clock_line(records: Sequence[dict[str, Any]]) -> str:
+def clock_line(records: Sequence[TrialRecord]) -> str:
     """What the budgets were measured on."""
     clocks = budget_clocks(records)
     if clocks == ["cpu"]:
@@ -89,7 +96,7 @@ def clock_line(records: Sequence[dict[str, Any]]) -> str:
     return f"Budgets on several clocks: {', '.join(clocks)} (each record's `budget_clock` says which)."
 
 
-def contention_markdown(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:
+def contention_markdown(records: Sequence[TrialRecord], planners: Sequence[str]) -> str:
     """summary.md's section: the clock, the rule, and the table (or why there is none)."""
     md = ["## Budget clock and machine contention", "", clock_line(records), ""]
     if not any(record_contended(r) is not None for r in records):
@@ -100,7 +107,7 @@ def contention_markdown(records: Sequence[dict[str, Any]], planners: Sequence[st
     return "\n".join(md) + "\n"
 
 
-def contention_json(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
+def contention_json(records: Sequence[TrialRecord]) -> dict[str, Any]:
     """summary.json's `contention`: `suite.run.contention.run_contention` of the records (rule,
     budget_clock, trials, measured, contended, contended_ids, by_planner, cpu_wait_share, load1)."""
     out = run_contention(records)

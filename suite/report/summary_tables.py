@@ -20,7 +20,7 @@ from suite.report.summary_stats import (
     PairedComparison,
     summarize,
 )
-from suite.run.records import SUCCESS, problem_counts
+from suite.run.records import SUCCESS, TrialRecord, problem_counts
 
 #: The success-aware time column: every problem counts, a failure at its budget.
 TIME_TO_SOLVE_LABEL = "time to solve, failures at budget (s)"
@@ -79,7 +79,7 @@ def common_rows(stats: dict[str, dict[str, MetricStats]], planners: Sequence[str
 TERMINAL_METRICS = {"length_ratio": "length /\nreference", "clearance_min_m": "clearance\n(mm)"}
 
 
-def summary_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None,
+def summary_table(records: Sequence[TrialRecord], *, planners: Sequence[str] | None = None,
                   wide: bool = False) -> str:
     """The per-planner table for the terminal, narrow enough for 80 columns: success k/n with its
     interval, the median time to solve (failures at the budget) and the medians of a few metrics,
@@ -110,7 +110,7 @@ def _terminal_row(g: GroupSummary) -> list[str]:
     return cells
 
 
-def certification_line(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:
+def certification_line(records: Sequence[TrialRecord], planners: Sequence[str]) -> str:
     """One line: per planner, its successes by exact verdict."""
     parts = []
     for p in planners:
@@ -127,30 +127,30 @@ BEST_KNOWN_INTRO = (
     "known, and is listed by problem: the dataset's best known is not the best there is.")
 
 
-def best_known_agreement(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any]:
+def best_known_agreement(records: Sequence[TrialRecord], planner: str) -> dict[str, Any]:
     """A planner's successes against the best known lengths: {successes (with a best known),
     equal (within BEST_KNOWN_EQUAL), beaten: [{problem_id, length_rad, best_known_rad, ratio}] for
     the certified ones shorter by more than that, longest gain first}."""
     n = equal = 0
     beaten = []
     for r in records:
-        if r.get("planner") != planner or r.get("status") != SUCCESS:
+        if r.planner != planner or r.status != SUCCESS:
             continue
-        best, length = r.get("reference_length_rad"), (r.get("metrics") or {}).get("path_length_rad")
+        best, length = r.reference_length_rad, (r.metrics or {}).get("path_length_rad")
         if not best or length is None:
             continue
         n += 1
         ratio = float(length) / float(best)
         if abs(ratio - 1.0) <= BEST_KNOWN_EQUAL:
             equal += 1
-        elif ratio < 1.0 - BEST_KNOWN_EQUAL and (r.get("certification") or {}).get("verdict") == "certified":
-            beaten.append({"problem_id": r.get("problem_id"), "length_rad": round(float(length), 6),
+        elif ratio < 1.0 - BEST_KNOWN_EQUAL and (r.certification or {}).get("verdict") == "certified":
+            beaten.append({"problem_id": r.problem_id, "length_rad": round(float(length), 6),
                            "best_known_rad": round(float(best), 6), "ratio": round(ratio, 4)})
     beaten.sort(key=lambda b: b["ratio"])
     return {"successes": n, "equal": equal, "beaten": beaten}
 
 
-def best_known_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def best_known_rows(records: Sequence[TrialRecord], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     headers = ["planner", "successes with a best known", "equal (0.1%)", "certified and shorter", "problems (ratio)"]
     rows = []
     for p in planners:
@@ -161,7 +161,7 @@ def best_known_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) 
     return headers, rows
 
 
-def composition(records: Sequence[dict[str, Any]]) -> str:
+def composition(records: Sequence[TrialRecord]) -> str:
     """One line: on how many distinct problems (how many trivial) and scenes the figures rest, and a
     warning when they are fewer than `FEW_PROBLEMS`."""
     c = problem_counts(records)
@@ -179,17 +179,17 @@ def composition(records: Sequence[dict[str, Any]]) -> str:
 VERDICTS = ("certified", "unproved", "collision")
 
 
-def certification_counts(records: Sequence[dict[str, Any]], planner: str) -> dict[str, int]:
+def certification_counts(records: Sequence[TrialRecord], planner: str) -> dict[str, int]:
     """Per verdict, the planner's successful trials (the 0.01 rad rule) with that exact verdict."""
     out = dict.fromkeys((*VERDICTS, "not checked"), 0)
     for r in records:
-        if r.get("planner") == planner and r.get("status") == SUCCESS:
-            verdict = (r.get("certification") or {}).get("verdict", "not checked")
+        if r.planner == planner and r.status == SUCCESS:
+            verdict = (r.certification or {}).get("verdict", "not checked")
             out[verdict] = out.get(verdict, 0) + 1
     return out
 
 
-def certification_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def certification_rows(records: Sequence[TrialRecord], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     headers = ["planner", "successes (0.01 rad)", *VERDICTS, "not checked"]
     rows = []
     for p in planners:
@@ -198,17 +198,17 @@ def certification_rows(records: Sequence[dict[str, Any]], planners: Sequence[str
     return headers, rows
 
 
-def cold_start(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any]:
+def cold_start(records: Sequence[TrialRecord], planner: str) -> dict[str, Any]:
     """A planner's cold trials (a worker's first of it) against its warm ones: how many, and the
     median planning and setup time (s) of each (None where there is no such trial)."""
     from suite.report.outcomes import is_cold
 
-    mine = [r for r in records if r.get("planner") == planner and "warm" in r]
+    mine = [r for r in records if r.planner == planner and r.warm is not None]
     cold = [r for r in mine if is_cold(r)]
     warm = [r for r in mine if not is_cold(r)]
 
     def med(rs, field):
-        v = [float(r[field]) for r in rs if isinstance(r.get(field), (int, float))]
+        v = [float(getattr(r, field)) for r in rs if isinstance(getattr(r, field), (int, float))]
         return float(np.median(v)) if v else None
 
     return {"cold_trials": len(cold), "warm_trials": len(warm),
@@ -216,7 +216,7 @@ def cold_start(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any
             "setup_time_s": {"cold": med(cold, "setup_time_s"), "warm": med(warm, "setup_time_s")}}
 
 
-def cold_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def cold_rows(records: Sequence[TrialRecord], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     headers = ["planner", "cold trials", "planning time, cold (s)", "planning time, warm (s)", "setup, cold (s)",
                "setup, warm (s)"]
     rows = []
@@ -228,12 +228,12 @@ def cold_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tup
     return headers, rows
 
 
-def attribution_summary(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any] | None:
+def attribution_summary(records: Sequence[TrialRecord], planner: str) -> dict[str, Any] | None:
     """Medians over a planner's warm trials that carry `attribution`: collision queries, seconds per
     query, query share of planning time; None if none carries it."""
     from suite.report.outcomes import is_cold
 
-    att = [r["attribution"] for r in records if r.get("planner") == planner and r.get("attribution")
+    att = [r.attribution for r in records if r.planner == planner and r.attribution
            and not is_cold(r)]
     if not att:
         return None
@@ -244,7 +244,7 @@ def attribution_summary(records: Sequence[dict[str, Any]], planner: str) -> dict
             "query_share": float(np.median([a["query_share"] for a in att]))}
 
 
-def attribution_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def attribution_rows(records: Sequence[TrialRecord], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     headers = ["planner", "engine", "trials", "collision queries", "us per query", "share of planning time"]
     rows = []
     for p in planners:
@@ -298,11 +298,11 @@ def failure_rows(groups: Sequence[GroupSummary], statuses: Sequence[str]) -> tup
     return headers, rows
 
 
-def failure_reason(rec: dict[str, Any]) -> str | None:
-    """A trial's stated reason for its status: the record's own `reason` where it has one, else its
-    planner's (`stats.reason`, or the error of a crashed trial); None if it states none."""
-    stats = rec.get("stats") or {}
-    for value in (rec.get("reason"), stats.get("reason"), stats.get("error")):
+def failure_reason(rec: TrialRecord) -> str | None:
+    """A trial's stated reason for its status: its planner's (`stats.reason`), or the error of a
+    crashed trial; None if it states none."""
+    stats = rec.stats or {}
+    for value in (stats.get("reason"), stats.get("error")):
         if isinstance(value, str) and value.strip():
             return value.strip()
     return None
@@ -312,23 +312,23 @@ def failure_reason(rec: dict[str, Any]) -> str | None:
 _NUMBER = re.compile(r"(?<![A-Za-z_])-?\d+(?:\.\d+)?(?:e-?\d+)?")
 
 
-def failure_reason_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def failure_reason_rows(records: Sequence[TrialRecord], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     """Failed trials by status and stated reason (numbers in the reason shown as #), one column per
     planner, the most frequent first."""
     counts: dict[tuple[str, str], dict[str, int]] = {}
     for r in records:
-        if r.get("status") == SUCCESS:
+        if r.status == SUCCESS:
             continue
         reason = failure_reason(r)
-        key = (str(r["status"]), _NUMBER.sub("#", reason) if reason else "(no reason recorded)")
+        key = (str(r.status), _NUMBER.sub("#", reason) if reason else "(no reason recorded)")
         row = counts.setdefault(key, {})
-        row[r["planner"]] = row.get(r["planner"], 0) + 1
+        row[r.planner] = row.get(r.planner, 0) + 1
     headers = ["status", "reason", *planners]
     ordered = sorted(counts.items(), key=lambda kv: (-sum(kv[1].values()), kv[0]))
     return headers, [[status, reason, *(c.get(p, 0) for p in planners)] for (status, reason), c in ordered]
 
 
-def cause_counts(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, int]]]:
+def cause_counts(records: Sequence[TrialRecord]) -> dict[str, dict[str, dict[str, int]]]:
     """Failed trials by enumerated cause (`planners.base.FailureReason`) and family:
     {planner: {cause: {family: trials}}}."""
     from suite.run.records import reason_code
@@ -337,12 +337,12 @@ def cause_counts(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[
     for r in records:
         code = reason_code(r)
         if code is not None:
-            row = out.setdefault(r["planner"], {}).setdefault(code, {})
+            row = out.setdefault(r.planner, {}).setdefault(code, {})
             row[family_of(r)] = row.get(family_of(r), 0) + 1
     return out
 
 
-def reason_code_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def reason_code_rows(records: Sequence[TrialRecord], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     """`cause_counts` as a table: one row per (planner, cause), one column per family, each
     planner's most frequent causes first."""
     counts = [((p, code), c) for p, causes in cause_counts(records).items() for code, c in causes.items()]
