@@ -22,6 +22,7 @@ from scenes.grasp_rule import down_pose, grasp_yaw, truth_grasp
 from scenes.identity_rule import CURRENT_RULE
 from scenes.robot_model import load_robot
 from scenes.spec import load_spec
+from suite.run.records import TrialRecord
 
 Q_SEED = np.array([-1.57, 0.1, 0.0, -1.2, 0.0, 1.6, 0.0])
 KINDS = ("approach", "descend", "lift", "transit", "return")
@@ -90,7 +91,7 @@ TIME_SCALE_S = {"ik": 0.05, "rrt": 0.4, "trajopt": 1.5}
 
 def synthetic_records(
     *, seeds=(0,), variants=("open", "wall"), cans: int = 2, planners=("ik", "rrt", "trajopt"), rng_seed: int = 7
-) -> list[dict]:
+) -> list[TrialRecord]:
     """Trial records in the runner's format for every scene, can, motion and planner."""
     robot = load_robot()
     rng = np.random.default_rng(rng_seed)
@@ -151,12 +152,13 @@ def synthetic_records(
                                 "clearance_min_m": float(rng.uniform(0.005, 0.08)),
                                 "duration_s": duration_lower_bound_s(path),
                             }
-                        records.append(rec)
+                        records.append(TrialRecord.from_json(rec))
     return records
 
 
-def write_run(run_dir: Path, records: list[dict], *, planners=("ik", "rrt", "trajopt"), cans: int = 2) -> Path:
-    """A run directory like the runner's: manifest.json and trials.jsonl."""
+def write_run(run_dir: Path, records: list[TrialRecord | dict], *, planners=("ik", "rrt", "trajopt"),
+              cans: int = 2) -> Path:
+    """A run directory like the runner's: manifest.json and trials.jsonl (records, or raw lines as dicts)."""
     run_dir.mkdir(parents=True, exist_ok=True)
     manifest = {"command": "python -m suite compare (synthetic)",
                 "config": {"planners": list(planners), "cans": cans, "spec": None, "time_limit_s": 10.0},
@@ -164,7 +166,7 @@ def write_run(run_dir: Path, records: list[dict], *, planners=("ik", "rrt", "tra
     (run_dir / "manifest.json").write_text(json.dumps(manifest))
     with open(run_dir / "trials.jsonl", "w") as f:
         for r in records:
-            f.write(json.dumps(r) + "\n")
+            f.write(json.dumps(r.to_json() if isinstance(r, TrialRecord) else r) + "\n")
     return run_dir
 
 

@@ -32,6 +32,7 @@ from typing import Any
 
 from suite.run.records import (
     STATUSES,
+    TrialRecord,
     is_success,
     metric,
     planners_in,
@@ -50,8 +51,8 @@ LIBRARY = "suite"
 FIXED_PROPERTIES: dict[str, tuple[str, Any]] = {
     "time": ("REAL", lambda r: metric(r, "planning_time_s")),
     "solved": ("BOOLEAN", lambda r: int(is_success(r))),
-    "scene seed": ("INTEGER", lambda r: int(r["scene_seed"])),
-    "can id": ("INTEGER", lambda r: None if r.get("can_id") is None else int(r["can_id"])),  # None: a free transit
+    "scene seed": ("INTEGER", lambda r: int(r.scene_seed)),
+    "can id": ("INTEGER", lambda r: None if r.can_id is None else int(r.can_id)),  # None: a free transit
 }
 
 
@@ -78,7 +79,7 @@ def _value(v: Any, sql_type: str) -> str:
 def _metric_names(records: Sequence[dict]) -> list[str]:
     names: dict[str, None] = {}
     for r in records:
-        for k, v in (r.get("metrics") or {}).items():
+        for k, v in (r.metrics or {}).items():
             if isinstance(v, (int, float)) and not isinstance(v, bool):
                 names.setdefault(k, None)
     reserved = set(FIXED_PROPERTIES) | {"status"}
@@ -112,7 +113,7 @@ def _multiline(text: str) -> list[str]:
 
 
 def benchmark_log(
-    records: Sequence[dict[str, Any]],
+    records: Sequence[TrialRecord],
     *,
     experiment: str,
     manifest: dict[str, Any] | None = None,
@@ -133,9 +134,9 @@ def benchmark_log(
     config = manifest.get("config") or {}
     machine = manifest.get("machine") or {}
     planners = list(planners) if planners is not None else planners_in(records, manifest)
-    statuses = list(STATUSES) + sorted({str(r["status"]) for r in records} - set(STATUSES))
+    statuses = list(STATUSES) + sorted({str(r.status) for r in records} - set(STATUSES))
     metrics = _metric_names(records)
-    props = {**FIXED_PROPERTIES, "status": ("ENUM", lambda r: statuses.index(str(r["status"])))}
+    props = {**FIXED_PROPERTIES, "status": ("ENUM", lambda r: statuses.index(str(r.status)))}
     for m in metrics:
         props[property_name(m)] = ("REAL", lambda r, m=m: metric(r, m))
     names = sorted(props)
@@ -143,18 +144,18 @@ def benchmark_log(
     started = manifest.get("started_utc") or dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
     exp_props = {
         "trials INTEGER": len(records),
-        "scenes INTEGER": len({(r["scene_seed"], r["variant"]) for r in records}),
-        "problems INTEGER": len({(r["scene_seed"], r["variant"], r["can_id"], r.get("task_index"), r["problem"])
+        "scenes INTEGER": len({(r.scene_seed, r.variant) for r in records}),
+        "problems INTEGER": len({(r.scene_seed, r.variant, r.can_id, r.task_index, r.problem)
                                  for r in records}),
     }
-    counts = {p: sum(r["planner"] == p for r in records) for p in planners}
-    time_limits = sorted({float(r["time_limit_s"]) for r in records if r.get("time_limit_s") is not None})
+    counts = {p: sum(r.planner == p for r in records) for p in planners}
+    time_limits = sorted({float(r.time_limit_s) for r in records if r.time_limit_s is not None})
     time_limit = time_limits[-1] if time_limits else float(config.get("time_limit_s") or 0.0)
     seed = config.get("seed", 0)
     total_time = sum(t for t in (metric(r, "planning_time_s") for r in records) if math.isfinite(t))
     setup = "\n".join(
         [f"command: {manifest.get('command', 'unknown')}",
-         f"variants: {', '.join(sorted({str(r['variant']) for r in records}))}",
+         f"variants: {', '.join(sorted({str(r.variant) for r in records}))}",
          f"problem kinds: {', '.join(problem_kinds_in(records))}",
          "time: planning wall time (s) measured by the suite's orchestrator; status: the trial outcome",
          f"config: {json.dumps(config, default=str, sort_keys=True)}"]
@@ -183,8 +184,8 @@ def benchmark_log(
         f"{len(planners)} planners",
     ]
     for p in planners:
-        mine = [r for r in records if r["planner"] == p]
-        settings = _settings_lines(mine[0].get("planner_config") if mine else None)
+        mine = [r for r in records if r.planner == p]
+        settings = _settings_lines(mine[0].planner_config if mine else None)
         out += [_token(p), f"{len(settings)} common properties", *settings]
         out.append(f"{len(names)} properties for each run")
         out += [f"{n} {props[n][0]}" for n in names]
@@ -202,10 +203,10 @@ def benchmark_log(
 PROGRESS_PROPERTIES = ("best cost REAL", "time REAL")
 
 
-def _progress_lines(records: Sequence[dict[str, Any]]) -> list[str]:
+def _progress_lines(records: Sequence[TrialRecord]) -> list[str]:
     """The progress block of one planner: every run's (best cost, time) points as "c,t,;c,t,;",
     written when any of its runs recorded progress (`stats.progress`, see planners.ompl_solve)."""
-    series = [(r.get("stats") or {}).get("progress") for r in records]
+    series = [(r.stats or {}).get("progress") for r in records]
     if not any(series):
         return []
     lines = [f"{len(PROGRESS_PROPERTIES)} progress properties for each run", *PROGRESS_PROPERTIES,
@@ -228,12 +229,12 @@ def write_arena_logs(run_dir: str | Path, *, records: Sequence[dict] | None = No
         return []
     manifest = read_manifest(run_dir)
     planners = planners_in(records, manifest)
-    variants = "_".join(sorted({str(r["variant"]) for r in records}))
+    variants = "_".join(sorted({str(r.variant) for r in records}))
     out_dir = run_dir / ARENA_DIR
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     groups = [("all_motions", LOG_NAME, list(records))] + [
-        (k, f"ompl_benchmark_{k}.log", [r for r in records if r["problem"] == k]) for k in problem_kinds_in(records)
+        (k, f"ompl_benchmark_{k}.log", [r for r in records if r.problem == k]) for k in problem_kinds_in(records)
     ]
     for label, name, recs in groups:
         path = out_dir / name

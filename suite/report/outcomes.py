@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from suite.run.records import is_success, metric, problem_key
+from suite.run.records import TrialRecord, is_success, metric, problem_key
 
 #: Below this many distinct problems a comparison is flagged as resting on too little evidence.
 FEW_PROBLEMS = 20
@@ -48,37 +48,37 @@ class Outcome:
         return self.successes / self.trials
 
 
-def scene_of(rec: dict[str, Any]) -> tuple:
+def scene_of(rec: TrialRecord) -> tuple:
     """The cluster a record's problem belongs to: its station (scene key, else seed and variant)."""
-    return (str(rec.get("scene_key") or rec["scene_seed"]), str(rec["variant"]))
+    return (str(rec.scene_key or rec.scene_seed), str(rec.variant))
 
 
-def family_of(rec: dict[str, Any]) -> str:
+def family_of(rec: TrialRecord) -> str:
     """The scene family of a record (the dataset's family, else the generated scene's variant)."""
-    return str(rec.get("family") or rec["variant"])
+    return str(rec.family or rec.variant)
 
 
 #: Metrics that time the planner: their medians are over warm trials only (`is_cold`).
 TIMES = ("planning_time_s", "time_to_trajectory_s")
 
 
-def is_cold(rec: dict[str, Any]) -> bool:
+def is_cold(rec: TrialRecord) -> bool:
     """True for a worker's first trial of its planner (imports, caches, first solve in its time);
     records without the flag (imports, runs before it existed) count as warm."""
-    return rec.get("warm") is False
+    return rec.warm is False
 
 
-def _time_at_budget(rec: dict[str, Any]) -> float:
+def _time_at_budget(rec: TrialRecord) -> float:
     t = metric(rec, "planning_time_s")
     if is_success(rec):
         return t
-    budget = rec.get("time_limit_s")
+    budget = rec.time_limit_s
     if isinstance(budget, (int, float)) and not isinstance(budget, bool) and math.isfinite(budget):
         return float(budget)
     return t
 
 
-def outcomes(records: Iterable[dict[str, Any]], *, metrics: Sequence[str]) -> dict[tuple, Outcome]:
+def outcomes(records: Iterable[TrialRecord], *, metrics: Sequence[str]) -> dict[tuple, Outcome]:
     """One planner's trials collapsed to one `Outcome` per distinct problem (in first-seen order).
 
     Args:
@@ -101,7 +101,7 @@ def outcomes(records: Iterable[dict[str, Any]], *, metrics: Sequence[str]) -> di
             key=key,
             scene=scene_of(recs[0]),
             family=family_of(recs[0]),
-            kind=str(recs[0]["problem"]),
+            kind=str(recs[0].problem),
             trials=len(recs),
             successes=len(ok),
             metrics=values,

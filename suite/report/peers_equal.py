@@ -34,7 +34,14 @@ import numpy as np
 
 from scenes.errors import SuiteError
 from suite.report.outcomes import cluster_bootstrap_median_ci
-from suite.run.records import TRIALS_FILE, is_success, problem_key, read_manifest, read_trials
+from suite.run.records import (
+    TRIALS_FILE,
+    TrialRecord,
+    is_success,
+    problem_key,
+    read_manifest,
+    read_trials,
+)
 
 #: `rrt` at most this times `roboplan-rrt`'s time (issue 50)
 TARGET_RATIO = 0.8
@@ -128,13 +135,13 @@ class SettingResult:
 # --- statistics -------------------------------------------------------------------------------------
 
 
-def time_to_valid_s(rec: dict[str, Any]) -> float:
+def time_to_valid_s(rec: TrialRecord) -> float:
     """A trial's time to a validated path (s): its planning time if the suite's validator
     accepted its path, else its budget (a failure counted at the budget)."""
-    return float(rec["planning_time_s"]) if is_success(rec) else float(rec["time_limit_s"])
+    return float(rec.planning_time_s) if is_success(rec) else float(rec.time_limit_s)
 
 
-def per_problem_medians(records: Sequence[dict[str, Any]]) -> dict[tuple, float]:
+def per_problem_medians(records: Sequence[TrialRecord]) -> dict[tuple, float]:
     """Per problem (`problem_key`): the median over its trials (seeds) of `time_to_valid_s`."""
     times: dict[tuple, list[float]] = {}
     for r in records:
@@ -210,10 +217,10 @@ def _median(values: Sequence[float | None]) -> float:
     return float(statistics.median(values)) if values else math.nan
 
 
-def _side_settings(recs: Sequence[dict[str, Any]]) -> tuple[str, str, str]:
+def _side_settings(recs: Sequence[TrialRecord]) -> tuple[str, str, str]:
     """(check, re-check, post-processing) of a planner's records, as they ran."""
-    stats = [r.get("stats") or {} for r in recs]
-    cfg = recs[0].get("planner_config") or {}
+    stats = [r.stats or {} for r in recs]
+    cfg = recs[0].planner_config or {}
     if "collision_check_step_rad" in cfg:  # roboplan-rrt: L2 steps, no re-check, its shortcutter
         step, norm = cfg["collision_check_step_rad"], "l2"
         post = f"PathShortcutter({cfg.get('shortcut_max_iters')})" if cfg.get("shortcut") else "none"
@@ -230,26 +237,26 @@ def _side_settings(recs: Sequence[dict[str, Any]]) -> tuple[str, str, str]:
     return f"{step:g} rad, {norm}" if step is not None else "not recorded", recheck, post
 
 
-def side_figures(planner: str, recs: Sequence[dict[str, Any]], *, seeds: int) -> Side:
+def side_figures(planner: str, recs: Sequence[TrialRecord], *, seeds: int) -> Side:
     """One planner's figures over its records at one setting (`Side`)."""
     ok = [r for r in recs if is_success(r)]
     by_problem: dict[tuple, int] = {}
     for r in ok:
         by_problem[problem_key(r)] = by_problem.get(problem_key(r), 0) + 1
     times = per_problem_medians(recs)
-    stats_ok = [r.get("stats") or {} for r in ok]
+    stats_ok = [r.stats or {} for r in ok]
     check, recheck, post = _side_settings(recs)
     return Side(
         planner=planner, check=check, recheck=recheck, post_processing=post, trials=len(recs),
         successes=len(ok), solved_every_seed=sum(1 for n in by_problem.values() if n >= seeds),
-        certified=sum(1 for r in ok if (r.get("certification") or {}).get("verdict") == "certified"),
+        certified=sum(1 for r in ok if (r.certification or {}).get("verdict") == "certified"),
         time_s=float(statistics.median(times.values())),
         search_s=_median([s.get("solve_time_s") for s in stats_ok]),
         post_s=_median([s.get("simplify_time_s") for s in stats_ok]),
-        length_ratio=_median([(r.get("metrics") or {}).get("length_ratio") for r in ok]),
-        samples_per_edge=_median([(r.get("stats") or {}).get("samples_per_edge") for r in recs]),
-        samples_per_edge_from=_mode([(r.get("stats") or {}).get("samples_per_edge_from") for r in recs], "not recorded"),
-        cold_trials=sum(1 for r in recs if r.get("warm") is False),
+        length_ratio=_median([(r.metrics or {}).get("length_ratio") for r in ok]),
+        samples_per_edge=_median([(r.stats or {}).get("samples_per_edge") for r in recs]),
+        samples_per_edge_from=_mode([(r.stats or {}).get("samples_per_edge_from") for r in recs], "not recorded"),
+        cold_trials=sum(1 for r in recs if r.warm is False),
     )
 
 
@@ -271,12 +278,12 @@ def analyse_setting(setting: Path, *, planners: tuple[str, str] = PLANNERS, resa
         commits.append(str(manifest.get("git_commit", "unknown")))
         datasets.add(str(config.get("dataset")))
         recs = read_trials(run)
-        per_run = {p: [r for r in recs if r["planner"] == p] for p in planners}
+        per_run = {p: [r for r in recs if r.planner == p] for p in planners}
         for p, rs in per_run.items():
             if not rs:
                 raise SuiteError(f"{run} has no trials of {p}")
-            budgets.update(float(r["time_limit_s"]) for r in rs)
-            ranges.update((r.get("planner_config") or {}).get("range_rad") for r in rs)
+            budgets.update(float(r.time_limit_s) for r in rs)
+            ranges.update((r.planner_config or {}).get("range_rad") for r in rs)
             records[p].extend(rs)
         a, b = ({problem_key(r) for r in per_run[p]} for p in planners)
         if a != b:
@@ -286,7 +293,7 @@ def analyse_setting(setting: Path, *, planners: tuple[str, str] = PLANNERS, resa
         raise SuiteError(f"{setting}: a run seed appears twice ({sorted(seeds)})")
     if len(datasets) > 1 or len(budgets) > 1:
         raise SuiteError(f"{setting}: runs of different datasets or budgets ({sorted(datasets)}, {sorted(budgets)})")
-    scenes = {problem_key(r): r.get("scene_key") for rs in records.values() for r in rs}
+    scenes = {problem_key(r): r.scene_key for rs in records.values() for r in rs}
     ratio = median_ratio(per_problem_medians(records[planners[0]]), per_problem_medians(records[planners[1]]),
                          clusters=scenes, resamples=resamples, seed=seed)
     rng_values = [r for r in ranges if r is not None]

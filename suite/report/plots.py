@@ -16,9 +16,17 @@ from pathlib import Path
 
 from suite.report.plots_common import PLOTS_DIR
 from suite.report.plots_execution import plot_execution
+from suite.report.plots_families import (
+    plot_length_ratio_by_family,
+    plot_success_by_family,
+)
 from suite.report.plots_paths import plot_gripper_paths, plot_joint_profiles
-from suite.report.plots_families import plot_length_ratio_by_family, plot_success_by_family
-from suite.report.plots_stats import NATURAL_POSE_METRICS, plot_metric_boxes, plot_outcomes, plot_time_cdf
+from suite.report.plots_stats import (
+    NATURAL_POSE_METRICS,
+    plot_metric_boxes,
+    plot_outcomes,
+    plot_time_cdf,
+)
 from suite.run.records import (
     is_success,
     planners_in,
@@ -74,14 +82,14 @@ def plot_jobs(run_dir: str | Path, *, records: Sequence[dict] | None = None, exe
     # the first scene (lowest seed) of each variant: the same file names whatever order trials finished in
     firsts: dict[str, int] = {}
     for r in records:
-        v = str(r["variant"])
-        firsts[v] = min(firsts.get(v, int(r["scene_seed"])), int(r["scene_seed"]))
+        v = str(r.variant)
+        firsts[v] = min(firsts.get(v, int(r.scene_seed)), int(r.scene_seed))
     for variant, seed in firsts.items():
         jobs.append((plot_gripper_paths, (records,), {**common, "scene_seed": seed, "variant": variant, "manifest": manifest,
                                                       "path": out_dir / f"gripper_paths_seed{seed}_{variant}.png"}))
     kinds = problem_kinds_in(records)
     kind = "transit" if "transit" in kinds else next(
-        (k for k in kinds if any(r["problem"] == k and is_success(r) for r in records)), None)
+        (k for k in kinds if any(r.problem == k and is_success(r) for r in records)), None)
     if kind is not None:
         jobs.append((plot_joint_profiles, (records,), {**common, "kind": kind, "path": out_dir / f"joint_profiles_{kind}.png"}))
     jobs.append((plot_time_attribution, (records,), {**common, "path": out_dir / "time_attribution.png"}))

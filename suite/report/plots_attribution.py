@@ -11,7 +11,6 @@ from suite.report.outcomes import family_of, is_cold
 from suite.report.plots_common import planner_colors, plt, save_figure
 from suite.run.records import SUCCESS
 
-
 #: How each engine's share is drawn: its hatch, and the legend words (the timing kind decides
 #: how far the share is to be trusted: clocked around each call, replayed from a sample of the
 #: solver's own iterates, or a lower bound).
@@ -29,9 +28,9 @@ def plot_time_attribution(records: Sequence[dict], *, planners: Sequence[str], p
     the median query share), the median planning time written above; a planner that does not
     count its queries gets a hatched bar marked "not counted". None if no record carries an
     attribution."""
-    if not any(r.get("attribution") for r in records):
+    if not any(r.attribution for r in records):
         return None
-    warm = [r for r in records if r.get("status") == SUCCESS and not is_cold(r)]
+    warm = [r for r in records if r.status == SUCCESS and not is_cold(r)]
     families = sorted({family_of(r) for r in warm})
     if not families:
         return None
@@ -44,11 +43,11 @@ def plot_time_attribution(records: Sequence[dict], *, planners: Sequence[str], p
         color = colors[planner]
         pos = x + (k - (len(planners) - 1) / 2) * width
         for i, fam in enumerate(families):
-            mine = [r for r in warm if r["planner"] == planner and family_of(r) == fam]
+            mine = [r for r in warm if r.planner == planner and family_of(r) == fam]
             if not mine:
                 continue
-            att = [r["attribution"] for r in mine if r.get("attribution")]
-            t = float(np.median([r["planning_time_s"] for r in mine]))
+            att = [r.attribution for r in mine if r.attribution]
+            t = float(np.median([r.planning_time_s for r in mine]))
             if att:
                 share = float(np.median([a["query_share"] for a in att]))
                 parts = _engine_shares(att, share)
@@ -66,7 +65,7 @@ def plot_time_attribution(records: Sequence[dict], *, planners: Sequence[str], p
     from matplotlib.patches import Patch
 
     handles = [Patch(color=colors[p], label=p) for p in planners]
-    checkers = sorted({str(r["checker"]) for r in warm if r.get("checker")})  # what python-fcl's decisions ran in
+    checkers = sorted({str(r.checker) for r in warm if r.checker})  # what python-fcl's decisions ran in
     labels = {e: ENGINE_STYLE.get(e, ("..", e))[1] for e in engines_seen}
     if "python-fcl" in labels and checkers:
         labels["python-fcl"] = f"python-fcl queries, {' and '.join(checkers)} (clocked)"

@@ -24,7 +24,7 @@ def _families(records: Sequence[dict]) -> list[str]:
 
 
 def _per_family(records: Sequence[dict], planner: str, family: str, metrics: Sequence[str]):
-    mine = [r for r in records if r["planner"] == planner and (family == ALL_FAMILIES or family_of(r) == family)]
+    mine = [r for r in records if r.planner == planner and (family == ALL_FAMILIES or family_of(r) == family)]
     return list(outcomes(mine, metrics=metrics).values())
 
 

@@ -88,10 +88,10 @@ def plot_gripper_paths(
     from scenes.robot_model import load_robot
 
     colors = planner_colors(planners)
-    scene_recs = [r for r in records if int(r["scene_seed"]) == scene_seed and r["variant"] == variant]
-    key = next((r.get("scene_key") for r in scene_recs if r.get("scene_key")), None)
+    scene_recs = [r for r in records if int(r.scene_seed) == scene_seed and r.variant == variant]
+    key = next((r.scene_key for r in scene_recs if r.scene_key), None)
     scene = _recorded_scene(manifest, variant, scene_seed, key,
-                            cans_seen=1 + max((int(r["can_id"]) for r in scene_recs if r.get("can_id") is not None),
+                            cans_seen=1 + max((int(r.can_id) for r in scene_recs if r.can_id is not None),
                                               default=-1))
     if scene is None:  # draw the variant's fixed parts at least
         from scenes.spec import load_spec
@@ -106,8 +106,8 @@ def plot_gripper_paths(
     _draw_scene(ax_side, spec, cans, dims=(1, 2))
     counts = {}
     for p in planners:
-        mine = [r for r in scene_recs if r["planner"] == p and is_success(r)]
-        counts[p] = (len(mine), sum(r["planner"] == p for r in scene_recs))
+        mine = [r for r in scene_recs if r.planner == p and is_success(r)]
+        counts[p] = (len(mine), sum(r.planner == p for r in scene_recs))
         for r in mine:
             q = joint_path(r)
             if q is None:
@@ -116,7 +116,7 @@ def plot_gripper_paths(
             for ax, (i, j) in ((ax_top, (0, 1)), (ax_side, (1, 2))):
                 ax.plot(p_WG[:, i], p_WG[:, j], color=colors[p], linewidth=1.3, alpha=0.8)
     # grasp poses, from the recorded goals of the descend motions
-    q_grasp = [r["q_goal"] for r in scene_recs if r["problem"] == "descend" and r.get("q_goal")]
+    q_grasp = [r.q_goal for r in scene_recs if r.problem == "descend" and r.q_goal]
     if q_grasp:
         p_grasp = robot.gripper_pose(np.asarray(q_grasp, float))[:, :3, 3]
         for ax, (i, j) in ((ax_top, (0, 1)), (ax_side, (1, 2))):
@@ -148,9 +148,9 @@ def _profile_records(records: Sequence[dict], planners: Sequence[str], kind: str
     """For one problem (of `kind`, in the first scene where most planners solved it), each planner's record."""
     cands: dict[tuple, dict[str, dict]] = {}
     for r in records:
-        if r["problem"] == kind and is_success(r) and joint_path(r) is not None:
-            key = (int(r["scene_seed"]), str(r["variant"]), problem_number(r))
-            cands.setdefault(key, {}).setdefault(r["planner"], r)
+        if r.problem == kind and is_success(r) and joint_path(r) is not None:
+            key = (int(r.scene_seed), str(r.variant), problem_number(r))
+            cands.setdefault(key, {}).setdefault(r.planner, r)
     if not cands:
         return None, {}
     order = {k: i for i, k in enumerate(cands)}

@@ -54,7 +54,7 @@ def _no_data(ax, text: str = "no successful trials") -> None:
 
 def _problem_values(records: Sequence[dict], planner: str, name: str) -> np.ndarray:
     """One value per distinct problem the planner solved (the median of its successful trials)."""
-    vals = np.array([o.metrics[name] for o in outcomes([r for r in records if r["planner"] == planner],
+    vals = np.array([o.metrics[name] for o in outcomes([r for r in records if r.planner == planner],
                                                         metrics=(name,)).values()], dtype=float)
     return vals[np.isfinite(vals)]
 
@@ -111,21 +111,21 @@ def plot_outcomes(records: Sequence[dict], *, planners: Sequence[str], path: Pat
     """Stacked bars of trial outcomes by status for each planner: over all motions and per kind."""
     statuses = statuses_in(records)
     kinds = problem_kinds_in(records)
-    groups = [("all motions", list(records))] + [(k, [r for r in records if r["problem"] == k]) for k in kinds]
+    groups = [("all motions", list(records))] + [(k, [r for r in records if r.problem == k]) for k in kinds]
     fig, axes = plt.subplots(1, len(groups), figsize=(2.0 + 0.8 * len(planners) * len(groups), 4.4),
                              squeeze=False, gridspec_kw={"width_ratios": [1.4] + [1] * (len(groups) - 1)})
     x = np.arange(len(planners))
     for ax, (label, recs) in zip(axes[0], groups):
         bottom = np.zeros(len(planners))
-        totals = np.array([sum(r["planner"] == p for r in recs) for p in planners], float)
+        totals = np.array([sum(r.planner == p for r in recs) for p in planners], float)
         frac_den = np.maximum(totals, 1)
         for s in statuses:
-            counts = np.array([sum(r["planner"] == p and r["status"] == s for r in recs) for p in planners], float)
+            counts = np.array([sum(r.planner == p and r.status == s for r in recs) for p in planners], float)
             ax.bar(x, counts / frac_den * 100, bottom=bottom, color=STATUS_COLORS.get(s, "#bbbbbb"),
                    edgecolor="white", linewidth=0.5, width=0.7)
             bottom += counts / frac_den * 100
         for i, p in enumerate(planners):
-            k = sum(r["planner"] == p and r["status"] == SUCCESS for r in recs)
+            k = sum(r.planner == p and r.status == SUCCESS for r in recs)
             ax.text(i, 101.5, f"{k}/{int(totals[i])}", ha="center", va="bottom", fontsize=8)
         ax.set_xticks(x, planners, rotation=30 if len(planners) > 3 else 0)
         for tick, p in zip(ax.get_xticklabels(), planners):
@@ -149,10 +149,10 @@ def plot_time_cdf(records: Sequence[dict], *, planners: Sequence[str], path: Pat
     fig, ax = plt.subplots(figsize=(7.5, 4.6))
     all_t = [t for t in metric_values(records, "planning_time_s") if t > 0]
     t_min = min(all_t) if all_t else 1e-3
-    limits = sorted({float(r["time_limit_s"]) for r in records if r.get("time_limit_s")})
+    limits = sorted({float(r.time_limit_s) for r in records if r.time_limit_s})
     t_max = max([max(all_t, default=1.0)] + limits)
     for p in planners:
-        mine = [r for r in records if r["planner"] == p]
+        mine = [r for r in records if r.planner == p]
         t = np.sort(metric_values(mine, "planning_time_s"))
         k, n = len(t), len(mine)
         xs = np.concatenate([[t_min / 2], t, [t_max * 1.5]])

@@ -86,8 +86,8 @@ def write_replay(run_dir: str | Path, problem: str, *, out: str | Path | None = 
     if stored is not None:
         scene = stored.scene.without_cans(stored.removed_can_ids)
         held, opening, note = stored.held, stored.gripper_opening_m, world.note
-    elif p.first.get("scene_key") in world.scenes:
-        scene, held, opening = world.scenes[p.first["scene_key"]], None, None
+    elif p.first.scene_key in world.scenes:
+        scene, held, opening = world.scenes[p.first.scene_key], None, None
         note = world.note + " The held can is not drawn (the run does not record it)."
     else:
         raise SuiteError(f"cannot rebuild the scene of problem {p.pid}: {world.note}")
@@ -107,7 +107,7 @@ def write_replay(run_dir: str | Path, problem: str, *, out: str | Path | None = 
     for planner in planners:
         q = next((joint_path(r) for r in p.trials.get(planner, ()) if joint_path(r) is not None), None)
         if q is None:
-            schedule[planner] = "no path (" + ", ".join(str(r["status"]) for r in p.trials.get(planner, ())) + ")"
+            schedule[planner] = "no path (" + ", ".join(str(r.status) for r in p.trials.get(planner, ())) + ")"
             continue
         traj = time_parameterize(q, robot=robot)
         if not traj.ok:

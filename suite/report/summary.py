@@ -58,7 +58,13 @@ from suite.report.summary_tables import (
     paired_rows,
     reason_code_rows,
 )
-from suite.run.records import STATUSES, planners_in, problem_counts, statuses_in
+from suite.run.records import (
+    STATUSES,
+    TrialRecord,
+    planners_in,
+    problem_counts,
+    statuses_in,
+)
 
 log = logging.getLogger(__name__)
 
@@ -82,7 +88,7 @@ def _success_json(g: GroupSummary) -> dict[str, Any]:
 
 
 def summary_json(
-    records: Sequence[dict[str, Any]], *, pairs: Sequence[PairedComparison], planners: Sequence[str],
+    records: Sequence[TrialRecord], *, pairs: Sequence[PairedComparison], planners: Sequence[str],
     summary: RunSummary | None = None,
 ) -> dict[str, Any]:
     """The machine-readable summary: the same numbers as summary.md, NaN written as null.
@@ -129,8 +135,8 @@ def summary_json(
             "attribution": attribution_summary(records, p),
             "cold_start": cold_start(records, p),
             "search": search_summary(records, p),
-            "post_processing": post_processing(next((r.get("planner_config") for r in records
-                                                     if r.get("planner") == p), None)),
+            "post_processing": post_processing(next((r.planner_config for r in records
+                                                     if r.planner == p), None)),
             "metrics": {m: _stats_json(g.metrics[m]) for m in SUMMARY_METRICS},
             TIME_TO_SOLVE: _stats_json(g.time_to_solve),
             "common_subset": {m: {"median": _num(common[m][p].median), "n": common[m][p].n} for m in SUMMARY_METRICS},
@@ -179,7 +185,7 @@ def _write_csv(path: Path, headers: list[str], rows: list[list[Any]]) -> None:
 
 
 def summary_markdown(
-    records: Sequence[dict[str, Any]],
+    records: Sequence[TrialRecord],
     *,
     pairs: Sequence[PairedComparison],
     planners: Sequence[str] | None = None,
@@ -214,17 +220,17 @@ def summary_markdown(
         md.append(tabulate(*reversed(common_rows(summary.common, planners)), tablefmt="github"))
     md += ["", "## Certified paths (successful trials)", "", CERTIFICATION_INTRO, ""]
     md.append(tabulate(*reversed(certification_rows(records, planners)), tablefmt="github"))
-    if any(r.get("reference_length_rad") for r in records):
+    if any(r.reference_length_rad for r in records):
         md += ["", "## Against the best known paths (successful trials)", "", BEST_KNOWN_INTRO, ""]
         md.append(tabulate(*reversed(best_known_rows(records, planners)), tablefmt="github"))
-    if any(r.get("attribution") for r in records):
+    if any(r.attribution for r in records):
         md += ["", "## Where planning time goes", "", ATTRIBUTION_INTRO, ""]
         md.append(tabulate(*reversed(attribution_rows(records, planners)), tablefmt="github"))
     search = search_rows(records, planners)
     if search[1]:
         md += ["", "## Search and simplification (OMPL planners)", "", SEARCH_INTRO, ""]
         md.append(tabulate(*reversed(search), tablefmt="github"))
-    if any("warm" in r for r in records):
+    if any(r.warm is not None for r in records):
         md += ["", "## Cold starts", "", COLD_INTRO, ""]
         md.append(tabulate(*reversed(cold_rows(records, planners)), tablefmt="github"))
     md += ["", "## Failures by status (trials)", ""]
@@ -235,7 +241,7 @@ def summary_markdown(
         md.append(tabulate(*reversed(causes), tablefmt="github"))
     md += ["", "## Per planner and problem kind", ""]
     md.append(tabulate(*reversed(group_rows(summary.by_kind, key="problem")), tablefmt="github"))
-    if len({r["variant"] for r in records}) > 1:
+    if len({r.variant for r in records}) > 1:
         md += ["", "## Per planner and scene family", ""]
         md.append(
             tabulate(*reversed(group_rows(summary.by_family, key="variant")), tablefmt="github")
@@ -256,7 +262,7 @@ def summary_markdown(
 
 def write_summary(
     run_dir: str | Path,
-    records: Sequence[dict[str, Any]],
+    records: Sequence[TrialRecord],
     *,
     planners: Sequence[str] | None = None,
     seed: int = 0,

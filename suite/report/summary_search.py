@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from suite.run.records import TrialRecord
+
 #: The stats an OMPL trial carries, in the order the table shows them.
 SEARCH_FIELDS = ("solve_time_s", "simplify_time_s", "length_before_rad", "length_after_rad")
 
@@ -41,25 +43,25 @@ def post_processing(config: dict[str, Any] | None) -> str:
     return "none"
 
 
-def search_summary(records: Sequence[dict[str, Any]], planner: str) -> dict[str, Any] | None:
+def search_summary(records: Sequence[TrialRecord], planner: str) -> dict[str, Any] | None:
     """Medians over a planner's warm successful trials that carry the four OMPL figures; None if
     none does (not an OMPL planner). `length_kept` is the median of after/before per trial."""
     from suite.report.outcomes import is_cold
 
-    mine = [r for r in records if r.get("planner") == planner and r.get("status") == "success" and not is_cold(r)
-            and all(isinstance((r.get("stats") or {}).get(f), (int, float)) for f in SEARCH_FIELDS)]
+    mine = [r for r in records if r.planner == planner and r.status == "success" and not is_cold(r)
+            and all(isinstance((r.stats or {}).get(f), (int, float)) for f in SEARCH_FIELDS)]
     if not mine:
         return None
-    out: dict[str, Any] = {"trials": len(mine), "post_processing": post_processing(mine[0].get("planner_config"))}
+    out: dict[str, Any] = {"trials": len(mine), "post_processing": post_processing(mine[0].planner_config)}
     for f in SEARCH_FIELDS:
-        out[f] = float(np.median([float(r["stats"][f]) for r in mine]))
-    kept = [r["stats"]["length_after_rad"] / r["stats"]["length_before_rad"] for r in mine
-            if r["stats"]["length_before_rad"] > 0]
+        out[f] = float(np.median([float(r.stats[f]) for r in mine]))
+    kept = [r.stats["length_after_rad"] / r.stats["length_before_rad"] for r in mine
+            if r.stats["length_before_rad"] > 0]
     out["length_kept"] = float(np.median(kept)) if kept else math.nan
     return out
 
 
-def search_rows(records: Sequence[dict[str, Any]], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
+def search_rows(records: Sequence[TrialRecord], planners: Sequence[str]) -> tuple[list[str], list[list[Any]]]:
     """The summary's table: one row per planner that records the OMPL figures."""
     from suite.report.summary_tables import format_number
 

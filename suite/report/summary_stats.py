@@ -15,7 +15,6 @@ import dataclasses
 import itertools
 import math
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
@@ -28,7 +27,7 @@ from suite.report.outcomes import (
     solved_count,
     wilson_interval,
 )
-from suite.run.records import planners_in, problem_kinds_in, statuses_in
+from suite.run.records import TrialRecord, planners_in, problem_kinds_in, statuses_in
 from suite.scoring.definitions import metric_def
 
 #: The metrics of the summary, in its column order: record field -> column label (`MetricDef.column`).
@@ -120,7 +119,7 @@ class PairedComparison:
 def _group(records: Sequence[dict], *, planner: str, problem: str, variant: str) -> GroupSummary:
     counts = {s: 0 for s in statuses_in(records)}
     for r in records:
-        counts[str(r["status"])] += 1
+        counts[str(r.status)] += 1
     per_problem = list(outcomes(records, metrics=SUMMARY_METRICS).values())
     return GroupSummary(
         planner=planner,
@@ -141,7 +140,7 @@ def _finite(values: Sequence[float]) -> np.ndarray:
 
 
 def summarize(
-    records: Sequence[dict[str, Any]], *, by: str | None = None, planners: Sequence[str] | None = None
+    records: Sequence[TrialRecord], *, by: str | None = None, planners: Sequence[str] | None = None
 ) -> list[GroupSummary]:
     """Per-planner summaries over distinct problems, over all records or split by "problem" kind or
     "variant" (the scene family).
@@ -154,10 +153,10 @@ def summarize(
     if by not in (None, "problem", "variant"):
         raise ValueError(f"by must be None, 'problem' or 'variant', got {by!r}")
     planners = list(planners) if planners is not None else planners_in(records)
-    field = {"problem": lambda r: str(r["problem"]), "variant": family_of}.get(by or "")
+    field = {"problem": lambda r: str(r.problem), "variant": family_of}.get(by or "")
     out = []
     for p in planners:
-        mine = [r for r in records if r["planner"] == p]
+        mine = [r for r in records if r.planner == p]
         if field is None:
             out.append(_group(mine, planner=p, problem=ALL, variant=ALL))
             continue
@@ -181,7 +180,7 @@ class RunSummary:
     common: dict[str, dict[str, MetricStats]]
 
 
-def summarize_run(records: Sequence[dict[str, Any]], *, planners: Sequence[str]) -> RunSummary:
+def summarize_run(records: Sequence[TrialRecord], *, planners: Sequence[str]) -> RunSummary:
     return RunSummary(
         overall=summarize(records, planners=planners),
         by_kind=summarize(records, by="problem", planners=planners),
@@ -191,7 +190,7 @@ def summarize_run(records: Sequence[dict[str, Any]], *, planners: Sequence[str])
 
 
 def common_subset_stats(
-    records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None,
+    records: Sequence[TrialRecord], *, planners: Sequence[str] | None = None,
     metrics: Sequence[str] = tuple(SUMMARY_METRICS),
 ) -> dict[str, dict[str, MetricStats]]:
     """metric -> planner -> stats over the distinct problems EVERY planner solved (no survivorship).
@@ -200,7 +199,7 @@ def common_subset_stats(
     subset all planners are measured on the same problems.
     """
     planners = list(planners) if planners is not None else planners_in(records)
-    per = {p: outcomes([r for r in records if r["planner"] == p], metrics=metrics) for p in planners}
+    per = {p: outcomes([r for r in records if r.planner == p], metrics=metrics) for p in planners}
     out: dict[str, dict[str, MetricStats]] = {}
     for name in metrics:
         keys = common_subset(per, name)
@@ -225,7 +224,7 @@ def wilcoxon_p(diffs: np.ndarray) -> float:
 
 
 def paired_comparisons(
-    records: Sequence[dict[str, Any]],
+    records: Sequence[TrialRecord],
     *,
     rng: np.random.Generator,
     metrics: Sequence[str] = tuple(SUMMARY_METRICS),
@@ -247,7 +246,7 @@ def paired_comparisons(
         n_resamples: bootstrap resamples.
     """
     planners = list(planners) if planners is not None else planners_in(records)
-    per = {p: outcomes([r for r in records if r["planner"] == p], metrics=metrics) for p in planners}
+    per = {p: outcomes([r for r in records if r.planner == p], metrics=metrics) for p in planners}
     out = []
     for name in metrics:
         for a, b in itertools.combinations(planners, 2):

@@ -100,7 +100,7 @@ def offline_per_world(records: Sequence[dict]) -> dict[str, float]:
     records of one world differ. Records without offline work are left out."""
     out: dict[str, float] = {}
     for r in records:
-        stats = r.get("stats") or {}
+        stats = r.stats or {}
         world = stats.get("world_hash")
         seconds = stats.get("offline_cpu_s") if stats.get("offline_cpu_s") is not None else stats.get("offline_s")
         if world is not None and seconds is not None and seconds > 0:

@@ -22,7 +22,7 @@ from typing import Any
 
 from scenes.errors import SuiteError
 from suite.report.html.page import REPORT_FILE, render
-from suite.run.records import TRIALS_FILE
+from suite.run.records import TRIALS_FILE, TrialRecord
 
 log = logging.getLogger(__name__)
 
@@ -32,7 +32,7 @@ __all__ = ["REPORT_FILE", "write_html"]
 def write_html(
     run_dir: str | Path,
     *,
-    records: Sequence[dict[str, Any]] | None = None,
+    records: Sequence[TrialRecord] | None = None,
     planners: Sequence[str] | None = None,
     summary=None,
     pairs=None,

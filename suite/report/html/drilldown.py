@@ -17,7 +17,14 @@ from typing import Any
 from suite.report.html.markup import esc
 from suite.report.html.problems import Problem
 from suite.report.summary_tables import failure_reason, format_number
-from suite.run.records import SUCCESS, is_success, metric, problem_number, problem_subject
+from suite.run.records import (
+    SUCCESS,
+    TrialRecord,
+    is_success,
+    metric,
+    problem_number,
+    problem_subject,
+)
 
 #: Where `python -m suite replay` writes a problem's 3-D replay, inside the run directory.
 REPLAYS_DIR = "replays"
@@ -25,8 +32,8 @@ REPLAYS_DIR = "replays"
 #: The drill-down's per-trial columns: (label, how to get the value from a record).
 TRIAL_COLUMNS: tuple[tuple[str, Any], ...] = (
     ("planning (s)", lambda r: format_number(metric(r, "planning_time_s"))),
-    ("setup (s)", lambda r: format_number(float(r["setup_time_s"]))
-     if isinstance(r.get("setup_time_s"), (int, float)) else "n/a"),
+    ("setup (s)", lambda r: format_number(float(r.setup_time_s))
+     if isinstance(r.setup_time_s, (int, float)) else "n/a"),
     ("timing (s)", lambda r: format_number(metric(r, "timing_time_s"))),
     ("length (rad)", lambda r: format_number(metric(r, "path_length_rad"))),
     ("length / ref.", lambda r: format_number(metric(r, "length_ratio"))),
@@ -42,10 +49,10 @@ def replay_path(run_dir: Path, pid: str) -> Path:
     return Path(run_dir) / REPLAYS_DIR / f"{pid}.html"
 
 
-def _verdict(r: dict[str, Any]) -> str:
+def _verdict(r: TrialRecord) -> str:
     if not is_success(r):
         return "-"
-    cert = r.get("certification")
+    cert = r.certification
     return str(cert.get("verdict")) if isinstance(cert, dict) and cert.get("verdict") else "not checked"
 
 
@@ -53,7 +60,7 @@ def _status_class(status: str) -> str:
     return "ok" if status == SUCCESS else ("slow" if status in ("timeout", "killed_timeout") else "fail")
 
 
-def _cell(trials: Sequence[dict[str, Any]]) -> tuple[str, str, float, str]:
+def _cell(trials: Sequence[TrialRecord]) -> tuple[str, str, float, str]:
     """A planner's cell of the problem table: (text, css class, sort value, status tokens).
 
     Sort value: the planning time for a success; failures after every success, by their time."""
@@ -63,12 +70,12 @@ def _cell(trials: Sequence[dict[str, Any]]) -> tuple[str, str, float, str]:
     times = [metric(r, "planning_time_s") for r in (ok or trials)]
     t = sorted(times)[len(times) // 2]
     if len(trials) == 1:
-        status = str(trials[0]["status"])
+        status = str(trials[0].status)
         text = f"{format_number(t)} s" if ok else f"{status.replace('_', ' ')} · {format_number(t)} s"
         if ok and _verdict(trials[0]) == "collision":
             text += " ⚠"
         return text, _status_class(status), (t if ok else 1e6 + t), status
-    statuses = " ".join(sorted({str(r["status"]) for r in trials}))
+    statuses = " ".join(sorted({str(r.status) for r in trials}))
     return (f"{len(ok)}/{len(trials)} solved · {format_number(t)} s", "ok" if len(ok) == len(trials) else "mixed",
             (t if ok else 1e6 + t), statuses)
 
@@ -143,16 +150,16 @@ def _trial_rows(p: Problem, planners: Sequence[str]) -> tuple[str, str]:
             continue
         for k, r in enumerate(trials):
             name = pl + (f" (trial {k + 1})" if len(trials) > 1 else "")
-            status = str(r["status"])
+            status = str(r.status)
             reason = failure_reason(r) or ("" if status == SUCCESS else "none recorded")
             cells = [f'<th><span class="swatch" data-planner="{esc(pl)}"></span>{esc(name)}</th>',
                      f'<td class="st {_status_class(status)}">{esc(status)}</td>',
                      f'<td class="reason">{esc(reason)}</td>', f"<td>{esc(_verdict(r))}</td>"]
             cells += [f'<td class="num">{esc(get(r))}</td>' for _, get in TRIAL_COLUMNS]
             rows.append(f"<tr>{''.join(cells)}</tr>")
-            st = {k2: v for k2, v in (r.get("stats") or {}).items() if k2 not in ("reason",)}
-            if r.get("certification"):
-                st["certification"] = r["certification"]
+            st = {k2: v for k2, v in (r.stats or {}).items() if k2 not in ("reason",)}
+            if r.certification:
+                st["certification"] = r.certification
             body = ", ".join(f"<code>{esc(str(k2))}</code>&nbsp;{esc(json.dumps(v) if not isinstance(v, str) else v)}"
                              for k2, v in st.items()) or "none recorded"
             stats.append(f"<li><b>{esc(name)}</b>: {body}</li>")

@@ -15,7 +15,7 @@ from suite.report.html.markup import esc, inline_md
 from suite.report.html.problems import drawing_json, group_problems, load_world
 from suite.report.plots_common import planner_colors
 from suite.report.summary_stats import PairedComparison, RunSummary
-from suite.run.records import statuses_in
+from suite.run.records import TrialRecord, statuses_in
 
 log = logging.getLogger(__name__)
 
@@ -49,7 +49,7 @@ def _filters(problems, planners: Sequence[str], statuses: Sequence[str]) -> str:
 def render(
     run_dir: Path,
     *,
-    records: Sequence[dict[str, Any]],
+    records: Sequence[TrialRecord],
     manifest: dict[str, Any],
     planners: Sequence[str],
     summary: RunSummary,

@@ -22,7 +22,13 @@ import numpy as np
 
 from suite.report.outcomes import family_of
 from suite.report.scene_outlines import SIDE, TOP, can_outline, scene_outlines
-from suite.run.records import PROBLEM_KINDS, joint_path, problem_key, problem_number
+from suite.run.records import (
+    PROBLEM_KINDS,
+    TrialRecord,
+    joint_path,
+    problem_key,
+    problem_number,
+)
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +59,7 @@ class Problem:
 
     @property
     def kind(self) -> str:
-        return str(self.first["problem"])
+        return str(self.first.problem)
 
 
 def problem_label(key: tuple) -> str:
@@ -64,20 +70,20 @@ def problem_label(key: tuple) -> str:
     return f"s{seed}-{variant}-c{can}-{kind}"
 
 
-def group_problems(records: Sequence[dict[str, Any]]) -> list[Problem]:
+def group_problems(records: Sequence[TrialRecord]) -> list[Problem]:
     """The run's distinct problems, ordered by family, scene, can and cycle order of the kind."""
     groups: dict[tuple, dict[str, list[dict]]] = {}
     firsts: dict[tuple, dict] = {}
     for r in records:
         key = problem_key(r)
         firsts.setdefault(key, r)
-        groups.setdefault(key, {}).setdefault(str(r["planner"]), []).append(r)
+        groups.setdefault(key, {}).setdefault(str(r.planner), []).append(r)
     kind_rank = {k: i for i, k in enumerate(PROBLEM_KINDS)}
 
     def order(key):
         r = firsts[key]
-        return (family_of(r), int(r["scene_seed"]), str(r.get("scene_key") or ""), problem_number(r),
-                kind_rank.get(str(r["problem"]), len(kind_rank)), problem_label(key))
+        return (family_of(r), int(r.scene_seed), str(r.scene_key or ""), problem_number(r),
+                kind_rank.get(str(r.problem), len(kind_rank)), problem_label(key))
 
     out = []
     for key in sorted(groups, key=order):
@@ -178,15 +184,15 @@ def load_world(problems: Sequence[Problem], manifest: dict[str, Any]) -> World:
 
     scenes = {}
     for p in problems:
-        key = p.first.get("scene_key")
+        key = p.first.scene_key
         if key in scenes or key is None:
             continue
-        scene = _recorded_scene(manifest, str(p.first["variant"]), int(p.first["scene_seed"]), key,
-                                cans_seen=1 + max((int(q.first["can_id"]) for q in problems
-                                                   if q.first.get("can_id") is not None), default=-1))
+        scene = _recorded_scene(manifest, str(p.first.variant), int(p.first.scene_seed), key,
+                                cans_seen=1 + max((int(q.first.can_id) for q in problems
+                                                   if q.first.can_id is not None), default=-1))
         if scene is not None:
             scenes[key] = scene
-    wanted = {p.first.get("scene_key") for p in problems}
+    wanted = {p.first.scene_key for p in problems}
     if not scenes:
         note = "The scenes are not drawn: they cannot be generated again as the run recorded them (spec and seed)."
     else:
@@ -201,14 +207,14 @@ def drawing_json(problems: Sequence[Problem], *, planners: Sequence[str], world:
     from scenes.robot_model import load_robot
 
     default = load_robot()
-    used = {p.first.get("scene_key") for p in problems}
+    used = {p.first.scene_key for p in problems}
     scenes = {k: scene_json(s) for k, s in world.scenes.items() if k in used}
     out: dict[str, Any] = {}
     for p in problems:
-        drawn = world.scenes.get(p.first.get("scene_key"))
+        drawn = world.scenes.get(p.first.scene_key)
         robot = load_robot(drawn.spec.robot) if drawn is not None else default  # the gripper's mount differs
         q0, q1 = (np.asarray(p.first[f], float) if p.first.get(f) else None for f in ("q_start", "q_goal"))
-        entry: dict[str, Any] = {"scene": p.first.get("scene_key") if p.first.get("scene_key") in scenes else None,
+        entry: dict[str, Any] = {"scene": p.first.scene_key if p.first.scene_key in scenes else None,
                                  "paths": {}}
         for name, q in (("start", q0), ("goal", q1)):
             if q is not None and q.shape == (7,):

@@ -37,7 +37,7 @@ from suite.report.summary_tables import (
     paired_rows,
     reason_code_rows,
 )
-from suite.run.records import statuses_in
+from suite.run.records import TrialRecord, statuses_in
 
 #: Where each standard figure goes, with its caption; PNGs not named here go under "Other figures".
 FIGURES: dict[str, tuple[str, str]] = {
@@ -83,8 +83,8 @@ def _duration_s(start: str | None, end: str | None) -> float | None:
         return None
 
 
-def _budgets(records: Sequence[dict[str, Any]]) -> str:
-    values = sorted({float(r["time_limit_s"]) for r in records if isinstance(r.get("time_limit_s"), (int, float))})
+def _budgets(records: Sequence[TrialRecord]) -> str:
+    values = sorted({float(r.time_limit_s) for r in records if isinstance(r.time_limit_s, (int, float))})
     from suite.report.summary_contention import budget_clocks
 
     clocks = budget_clocks(records)
@@ -92,7 +92,7 @@ def _budgets(records: Sequence[dict[str, Any]]) -> str:
     return (", ".join(f"{v:g} s" for v in values) + of) if values else "not recorded"
 
 
-def headline_facts(run_dir: Path, manifest: dict[str, Any], records: Sequence[dict[str, Any]],
+def headline_facts(run_dir: Path, manifest: dict[str, Any], records: Sequence[TrialRecord],
                    planners: Sequence[str]) -> str:
     """The line under the title: trials, planners, problems, dataset and budget."""
     ds = manifest.get("dataset") or {}
@@ -105,7 +105,7 @@ def headline_facts(run_dir: Path, manifest: dict[str, Any], records: Sequence[di
             + _contention_warning(records))
 
 
-def _contention_warning(records: Sequence[dict[str, Any]]) -> str:
+def _contention_warning(records: Sequence[TrialRecord]) -> str:
     """summary.md's warning when trials were contended (`suite.report.summary_contention`), or nothing."""
     from suite.report.summary_contention import contention_warning
 
@@ -126,7 +126,7 @@ def _provenance_line(manifest: dict[str, Any]) -> str:
     return f'<p class="facts">{shown} &middot; <a href="#settings">all settings</a></p>' if shown else ""
 
 
-def settings_html(manifest: dict[str, Any], records: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:
+def settings_html(manifest: dict[str, Any], records: Sequence[TrialRecord], planners: Sequence[str]) -> str:
     """The run's settings and provenance: dataset, budget, planners and their configs, machine, versions."""
     if not manifest:
         rows = [["manifest", "none in the run directory: only what the trial records hold is shown"]]
@@ -152,7 +152,7 @@ def settings_html(manifest: dict[str, Any], records: Sequence[dict[str, Any]], p
     out = [table(["setting", "value"], [[k, str(v)] for k, v in rows], cls="settings")]
     out.append("<h3>Planner settings (as recorded with their trials)</h3>")
     for p in planners:
-        configs = {json.dumps(r.get("planner_config"), sort_keys=True) for r in records if r["planner"] == p}
+        configs = {json.dumps(r.planner_config, sort_keys=True) for r in records if r.planner == p}
         cfg = json.loads(next(iter(configs))) if len(configs) == 1 else None
         if isinstance(cfg, dict):
             body = ", ".join(f"<code>{esc(str(k))}</code>&nbsp;{esc(json.dumps(v))}" for k, v in cfg.items())
@@ -170,7 +170,7 @@ INTRO = (
     "solved problems; the common-subset table measures all planners on the same problems.")
 
 
-def overview_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: RunSummary,
+def overview_html(run_dir: Path, records: Sequence[TrialRecord], summary: RunSummary,
                   planners: Sequence[str]) -> str:
     """The headline: the per-planner table with intervals, the common subset, certification, two figures."""
     out = [inline_md(INTRO), table(*group_rows(summary.overall, key=None), cls="headline", stacked=True)]
@@ -206,11 +206,11 @@ def success_matrix(groups: Sequence[GroupSummary], overall: Sequence[GroupSummar
             f'<tbody>{"".join(rows)}</tbody></table></div>')
 
 
-def families_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: RunSummary,
+def families_html(run_dir: Path, records: Sequence[TrialRecord], summary: RunSummary,
                   planners: Sequence[str]) -> str:
     """Per scene family and per problem kind: success at a glance, every metric one click away."""
     out = [inline_md("Problems solved / distinct problems (rate), 95% Wilson interval below.")]
-    if len({r["variant"] for r in records}) > 1:
+    if len({r.variant for r in records}) > 1:
         out += [success_matrix(summary.by_family, summary.overall, key="variant", planners=planners, title="family"),
                 '<details><summary>Every metric per planner and family</summary>',
                 table(*group_rows(summary.by_family, key="variant"), cls="grouped", stacked=True), "</details>"]
@@ -221,7 +221,7 @@ def families_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: Run
     return "".join(out)
 
 
-def failures_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: RunSummary,
+def failures_html(run_dir: Path, records: Sequence[TrialRecord], summary: RunSummary,
                   planners: Sequence[str]) -> str:
     """Failed trials by status, and by the reason the planner gave."""
     headers, rows = failure_reason_rows(records, planners)
@@ -238,7 +238,7 @@ def failures_html(run_dir: Path, records: Sequence[dict[str, Any]], summary: Run
     ])
 
 
-def more_stats_html(records: Sequence[dict[str, Any]], pairs: Sequence[PairedComparison],
+def more_stats_html(records: Sequence[TrialRecord], pairs: Sequence[PairedComparison],
                     planners: Sequence[str]) -> str:
     """Paired comparisons, where planning time goes, the OMPL planners' search and simplification apart and
     cold starts, when the records hold them."""
@@ -248,7 +248,7 @@ def more_stats_html(records: Sequence[dict[str, Any]], pairs: Sequence[PairedCom
             "Differences A - B on the distinct problems both planners solved: median, percentile-bootstrap 95% CI "
             f"resampling whole scenes ({N_RESAMPLES} resamples), two-sided Wilcoxon signed-rank p-value. Negative "
             "means A is lower."), table(*paired_rows(pairs))]
-    if any(r.get("attribution") for r in records):
+    if any(r.attribution for r in records):
         out += ["<h3>Where planning time goes</h3>", inline_md(ATTRIBUTION_INTRO),
                 table(*attribution_rows(records, planners))]
     from suite.report.summary_search import SEARCH_INTRO, search_rows
@@ -256,7 +256,7 @@ def more_stats_html(records: Sequence[dict[str, Any]], pairs: Sequence[PairedCom
     search = search_rows(records, planners)
     if search[1]:
         out += ["<h3>Search and simplification (OMPL planners)</h3>", inline_md(SEARCH_INTRO), table(*search)]
-    if any("warm" in r for r in records):
+    if any(r.warm is not None for r in records):
         out += ["<h3>Cold starts</h3>", inline_md(COLD_INTRO), table(*cold_rows(records, planners))]
     return "".join(out)
 
@@ -277,7 +277,7 @@ def execution_html(run_dir: Path, executions: Sequence[dict[str, Any]], planners
     ])
 
 
-def moving_bin_html(run_dir: Path, records: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:
+def moving_bin_html(run_dir: Path, records: Sequence[TrialRecord], planners: Sequence[str]) -> str:
     """moving_bin.json's tables (per planner and speed; planners paired over shared episodes; latency
     per step), its figure and the episodes' Meshcat replays."""
     from suite.report.summary_moving_bin import MOVING_BIN_INTRO, moving_bin_tables
