@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from suite.report.plots_common import plt, save_figure
-from suite.report.scene_outlines import SIDE, TOP, _translation as _at, primitive_outline
+from suite.report.scene_outlines import SIDE, TOP, primitive_outline
+from suite.report.scene_outlines import _translation as _at
 
 
 def perceived_world_figure(truth, world, out: str | Path, *, title: str = "") -> Path:

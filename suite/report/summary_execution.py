@@ -9,7 +9,13 @@ import numpy as np
 from tabulate import tabulate
 
 from suite.report.summary_tables import format_number
-from suite.run.records import BACK_ON_PLATE, ELSEWHERE, FINAL_RETURN_NOT_EXECUTED, NOT_ATTEMPTED, fate_counts
+from suite.run.records import (
+    BACK_ON_PLATE,
+    ELSEWHERE,
+    FINAL_RETURN_NOT_EXECUTED,
+    NOT_ATTEMPTED,
+    fate_counts,
+)
 
 EXECUTION_INTRO = """## Execution in physics
 

@@ -30,9 +30,9 @@ def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, 
         SuiteError: run_dir does not exist or holds no trials.jsonl, or a record line is broken.
     """
     from suite.report.arena import write_arena_logs
-    from suite.run.records import planners_in, read_manifest, read_trials
     from suite.report.summary import write_summary
     from suite.report.summary_tables import summary_table
+    from suite.run.records import planners_in, read_manifest, read_trials
 
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
@@ -45,11 +45,10 @@ def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, 
     records = by_budget_view(raw)  # several budgets: each (planner, budget) is its own entry
     budget_records = raw if len(budgets_in(raw)) > 1 else []
     planners = planners_in(records, read_manifest(run_dir))
-    from suite.execution.jobs import read_execution
-    from suite.report.summary_execution import execution_table
-
     import numpy as np
 
+    from suite.execution.jobs import read_execution
+    from suite.report.summary_execution import execution_table
     from suite.report.summary_stats import paired_comparisons, summarize_run
 
     executions = read_execution(run_dir)

@@ -121,6 +121,12 @@ class TrialRecord:
         out.update((k, v) for k, v in self.extra.items() if k not in out)
         return out
 
+    def __eq__(self, other: object) -> bool:
+        """Two records are equal when their JSON is (whatever order the keys were read in)."""
+        return isinstance(other, TrialRecord) and self.to_json() == other.to_json()
+
+    __hash__ = None  # type: ignore[assignment]  # mutable, compared by value
+
     def with_(self, **changes: Any) -> TrialRecord:
         """A copy with some fields changed (the stats and metrics dicts copied, not shared)."""
         return dataclasses.replace(self, **{"stats": dict(self.stats), "metrics": dict(self.metrics), **changes})

@@ -91,13 +91,13 @@ def problem_table(problems: Sequence[Problem], planners: Sequence[str]) -> str:
     for p in problems:
         f = p.first
         solved = sum(any(is_success(r) for r in p.trials.get(pl, ())) for pl in planners)
-        diff = f.get("difficulty")
-        ref = f.get("reference_length_rad")
+        diff = f.difficulty
+        ref = f.reference_length_rad
         cells = [
             f'<td data-v="{esc(p.pid)}"><a href="#{esc(p.anchor)}" title="{esc(p.pid)}">{esc(p.pid[:10])}</a></td>',
             f"<td>{esc(p.family)}</td>", f"<td>{esc(p.kind)}</td>",
-            f'<td class="num" data-v="{int(f["scene_seed"])}" title="scene key {esc(str(f.get("scene_key")))}">'
-            f'{int(f["scene_seed"])}</td>',
+            f'<td class="num" data-v="{int(f.scene_seed)}" title="scene key {esc(str(f.scene_key))}">'
+            f'{int(f.scene_seed)}</td>',
             f'<td class="num" title="{esc(problem_subject(f))}">{problem_number(f)}</td>',  # a free transit: its task
             f'<td class="num" data-v="{diff if isinstance(diff, (int, float)) else -1}">'
             f'{format_number(float(diff)) if isinstance(diff, (int, float)) else "-"}</td>',
@@ -119,19 +119,19 @@ def problem_table(problems: Sequence[Problem], planners: Sequence[str]) -> str:
 
 def _facts(p: Problem) -> str:
     f = p.first
-    held = f.get("held")
-    parts = [f"scene seed {f['scene_seed']}" + (f" (key {f['scene_key']})" if f.get("scene_key") else ""),
+    held = f.held
+    parts = [f"scene seed {f.scene_seed}" + (f" (key {f.scene_key})" if f.scene_key else ""),
              problem_subject(f), "holding the can" if held else ("empty gripper" if held is False else "")]
-    if f.get("trivial") is not None:
-        parts.append("trivial (its straight segment is valid)" if f["trivial"] else "not trivial")
-    if isinstance(f.get("difficulty"), (int, float)):
-        parts.append(f"difficulty {format_number(float(f['difficulty']))}")
-    if f.get("split"):
-        parts.append(f"{f['split']} split")
-    for key, label in (("straight_length_rad", "straight segment"), ("reference_length_rad", "reference path")):
-        if isinstance(f.get(key), (int, float)):
-            parts.append(f"{label} {format_number(float(f[key]))} rad")
-    budget = f.get("time_limit_s")
+    if f.trivial is not None:
+        parts.append("trivial (its straight segment is valid)" if f.trivial else "not trivial")
+    if isinstance(f.difficulty, (int, float)):
+        parts.append(f"difficulty {format_number(float(f.difficulty))}")
+    if f.split:
+        parts.append(f"{f.split} split")
+    for value, label in ((f.straight_length_rad, "straight segment"), (f.reference_length_rad, "reference path")):
+        if isinstance(value, (int, float)):
+            parts.append(f"{label} {format_number(float(value))} rad")
+    budget = f.time_limit_s
     if isinstance(budget, (int, float)):
         parts.append(f"budget {budget:g} s")
     return " &middot; ".join(esc(x) for x in parts if x)

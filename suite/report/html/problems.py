@@ -213,7 +213,7 @@ def drawing_json(problems: Sequence[Problem], *, planners: Sequence[str], world:
     for p in problems:
         drawn = world.scenes.get(p.first.scene_key)
         robot = load_robot(drawn.spec.robot) if drawn is not None else default  # the gripper's mount differs
-        q0, q1 = (np.asarray(p.first[f], float) if p.first.get(f) else None for f in ("q_start", "q_goal"))
+        q0, q1 = (np.asarray(q, float) if q else None for q in (p.first.q_start, p.first.q_goal))
         entry: dict[str, Any] = {"scene": p.first.scene_key if p.first.scene_key in scenes else None,
                                  "paths": {}}
         for name, q in (("start", q0), ("goal", q1)):

@@ -21,10 +21,10 @@ PROPERTY_TYPES = {"REAL", "INTEGER", "BOOLEAN", "ENUM"}
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory):
     records = synthetic_records(seeds=(0,), variants=("open",), cans=1, planners=("ik", "rrt"), rng_seed=11)
-    records[0]["status"] = "crash"  # a record written by the runner for a dead worker
-    records[0].update(path=None, metrics={})
-    ok = next(r for r in records[1:] if r["status"] == "success")
-    ok["metrics"]["clearance_min_m"] = None  # a metric the trial could not compute
+    records[0].status = "crash"  # a record written by the runner for a dead worker
+    records[0].path, records[0].metrics = None, {}
+    ok = next(r for r in records[1:] if r.status == "success")
+    ok.metrics["clearance_min_m"] = None  # a metric the trial could not compute
     return write_run(tmp_path_factory.mktemp("run"), records, planners=("ik", "rrt"), cans=1)
 
 
@@ -124,15 +124,15 @@ def test_log_structure_and_values(run_dir):
     assert props["path length rad"] == "REAL" and props["clearance min m"] == "REAL"
     assert log["planners"]["ik"]["common"] == {"name": "ik"}
     for p, data in log["planners"].items():
-        mine = [r for r in records if r["planner"] == p]
+        mine = [r for r in records if r.planner == p]
         assert len(data["runs"]) == len(mine)
         for rec, run in zip(mine, data["runs"]):
-            assert float(run["time"]) == rec["planning_time_s"]  # repr round-trips exactly
-            assert run["solved"] == ("1" if rec["status"] == "success" else "0")
-            assert log["status_enum"][int(run["status"])] == rec["status"]
-            assert int(run["scene seed"]) == rec["scene_seed"] and int(run["can id"]) == rec["can_id"]
+            assert float(run["time"]) == rec.planning_time_s  # repr round-trips exactly
+            assert run["solved"] == ("1" if rec.status == "success" else "0")
+            assert log["status_enum"][int(run["status"])] == rec.status
+            assert int(run["scene seed"]) == rec.scene_seed and int(run["can id"]) == rec.can_id
             for name in ("path_length_rad", "clearance_min_m", "duration_s"):
-                v, text = (rec["metrics"] or {}).get(name), run[property_name(name)]
+                v, text = (rec.metrics or {}).get(name), run[property_name(name)]
                 assert text == "" if v is None else math.isclose(float(text), v)
     first = log["planners"]["ik"]["runs"][0]
     assert log["status_enum"][int(first["status"])] == "crash" and first["path length rad"] == ""
@@ -199,8 +199,8 @@ def test_ompl_benchmark_statistics_script(run_dir, tmp_path):
 def test_optimizing_planners_progress_goes_to_the_progress_block(tmp_path):
     records = synthetic_records(seeds=(0,), variants=("open",), cans=1, planners=("rrtstar", "rrt"), rng_seed=3)
     for r in records:
-        if r["planner"] == "rrtstar":
-            r.setdefault("stats", {})["progress"] = [[0.05, None], [0.1, 2.5], [0.15, 2.25]]
+        if r.planner == "rrtstar":
+            r.stats["progress"] = [[0.05, None], [0.1, 2.5], [0.15, 2.25]]
     log = parse_log(benchmark_log(records, experiment="progress"))
     star, rrt = log["planners"]["rrtstar"], log["planners"]["rrt"]
     assert rrt["progress"] == []  # a feasibility planner reports none

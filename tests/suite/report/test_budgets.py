@@ -15,10 +15,10 @@ def _budget_run():
         for i in range(4):
             r = record("rrtstar", seed=i, length_rad=1.0 + i / budget / 10,
                        status="success" if i < solved else "timeout", time_s=min(budget, 0.05))
-            r["time_limit_s"] = budget
-            r["trial_id"] += f"-{budget}"
-            if r["status"] == "success":
-                r["metrics"]["length_ratio"] = r["metrics"]["path_length_rad"]
+            r.time_limit_s = budget
+            r.trial_id += f"-{budget}"
+            if r.status == "success":
+                r.metrics["length_ratio"] = r.metrics["path_length_rad"]
             recs.append(r)
     return recs
 
@@ -26,7 +26,7 @@ def _budget_run():
 def test_budgets_are_kept_apart():
     recs = _budget_run()
     assert budgets_in(recs) == [0.1, 1.0]
-    assert {r["planner"] for r in by_budget_view(recs)} == {"rrtstar@0.1s", "rrtstar@1s"}
+    assert {r.planner for r in by_budget_view(recs)} == {"rrtstar@0.1s", "rrtstar@1s"}
     assert by_budget_view(recs[:4]) == recs[:4]  # one budget: names unchanged
     table = budget_table(recs, planners=["rrtstar"])
     rows = [[c.strip() for c in line.split("|")[1:-1]] for line in table.splitlines()[2:]]
@@ -35,7 +35,7 @@ def test_budgets_are_kept_apart():
 
 
 def test_report_of_a_budget_run(tmp_path):
-    (tmp_path / "trials.jsonl").write_text("".join(json.dumps(r) + "\n" for r in _budget_run()))
+    (tmp_path / "trials.jsonl").write_text("".join(json.dumps(r.to_json()) + "\n" for r in _budget_run()))
     write_report(tmp_path)
     md = (tmp_path / "summary.md").read_text()
     assert "## By budget" in md and "rrtstar@0.1s" in md and "rrtstar@1s" in md

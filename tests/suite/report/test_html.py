@@ -15,14 +15,14 @@ from scenes.robot_model import load_robot
 from suite.cli import main
 from suite.report.html import REPORT_FILE, write_html
 from suite.report.html.problems import thin
-from suite.run.records import problem_key
+from suite.run.records import TrialRecord, problem_key
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     records = synthetic_records(seeds=(3,), variants=("open", "wall"), cans=1)
-    records[0].update(status="no_solution", path=None, metrics={},
-                      stats={"reason": "knot 7 (t=12): IK failed (kIterationLimit)"})
+    records[0] = records[0].with_(status="no_solution", path=None, metrics={},
+                                  stats={"reason": "knot 7 (t=12): IK failed (kIterationLimit)"})
     run_dir = write_run(tmp_path_factory.mktemp("run"), records)
     page = write_html(run_dir).read_text(encoding="utf-8")
     return run_dir, records, page
@@ -60,17 +60,17 @@ def test_each_successful_path_is_drawn_from_its_start_to_its_goal(run):
         pid = "s{}-{}-c{}-{}".format(*problem_key(r))
         entry = data["problems"][pid]
         assert entry["scene"] is None  # synthetic scenes (check_reachable=False) cannot be generated again
-        if r["status"] != "success":
-            assert r["planner"] not in entry["paths"]
+        if r.status != "success":
+            assert r.planner not in entry["paths"]
             continue
-        g = np.reshape(entry["paths"][r["planner"]]["g"], (-1, 3)) / 1000
-        q = np.asarray(r["path"])
+        g = np.reshape(entry["paths"][r.planner]["g"], (-1, 3)) / 1000
+        q = np.asarray(r.path)
         assert np.allclose(g[0], robot.gripper_pose(q[0])[:3, 3], atol=0.001)
         assert np.allclose(g[-1], robot.gripper_pose(q[-1])[:3, 3], atol=0.001)
-        joints = np.reshape(entry["paths"][r["planner"]]["q"], (-1, 7)) / 1000
-        s = np.asarray(entry["paths"][r["planner"]]["s"]) / 1000
+        joints = np.reshape(entry["paths"][r.planner]["q"], (-1, 7)) / 1000
+        s = np.asarray(entry["paths"][r.planner]["s"]) / 1000
         assert np.allclose(joints[[0, -1]], q[[0, -1]], atol=0.001)
-        assert s[-1] == pytest.approx(r["metrics"]["path_length_rad"], abs=0.002)
+        assert s[-1] == pytest.approx(r.metrics["path_length_rad"], abs=0.002)
         drawn += 1
     assert drawn >= 20
     assert data["scenes"] == {} and "The scenes are not drawn" in page  # said, not made up
@@ -126,9 +126,9 @@ def test_thin_keeps_a_polyline_within_tolerance():
 
 def test_older_records_without_newer_fields(tmp_path):
     records = synthetic_records(seeds=(0,), variants=("open",), cans=1, planners=("ik", "rrt"))
-    for r in records:  # a run from before problem ids, certification, warm flags and setup times
-        for key in ("problem_id", "certification", "attribution", "warm", "setup_time_s", "scene_key"):
-            r.pop(key, None)
+    older = ("problem_id", "certification", "attribution", "warm", "setup_time_s", "scene_key")
+    # a run from before problem ids, certification, warm flags and setup times
+    records = [TrialRecord.from_json({k: v for k, v in r.to_json().items() if k not in older}) for r in records]
     page = write_html(write_run(tmp_path, records, planners=("ik", "rrt"), cans=1)).read_text(encoding="utf-8")
     assert len(re.findall(r'<section class="drill" ', page)) == 5
     assert "not checked" in page  # the exact verdict of a success that never had one

@@ -15,7 +15,11 @@ from suite.report.summary_moving_bin import (
     speed_cells,
     stages_cell,
 )
-from suite.report.summary_moving_bin_paired import bootstrap_mean_ci, paired_differences, paired_rows
+from suite.report.summary_moving_bin_paired import (
+    bootstrap_mean_ci,
+    paired_differences,
+    paired_rows,
+)
 
 #: The fields the loop's records gained when replans joined on the move (an older file lacks them).
 NEW_RECORD_FIELDS = ("bin_seed", "path_index", "latency_mode", "release_mode", "cans_put_down", "cans_not_attempted",

@@ -12,13 +12,14 @@ import pytest
 from scenes.errors import SuiteError
 from suite.report import peers_equal as pe
 from suite.run.formats import MANIFEST_FORMAT_VERSION, RECORD_FORMAT_VERSION
+from suite.run.records import TrialRecord
 
 
 def _rec(planner: str, pid: str, *, time_s: float, ok: bool = True, scene: str = "s0", budget_s: float = 5.0,
-         **extra) -> dict:
-    return {"format_version": RECORD_FORMAT_VERSION, "planner": planner, "problem": "transit", "scene_seed": 0,
+         **extra) -> TrialRecord:
+    return TrialRecord.from_json({"format_version": RECORD_FORMAT_VERSION, "planner": planner, "problem": "transit", "scene_seed": 0,
             "variant": "window", "can_id": 0, "problem_id": pid, "scene_key": scene, "time_limit_s": budget_s,
-            "status": "success" if ok else "timeout", "planning_time_s": time_s, "warm": True, **extra}
+            "status": "success" if ok else "timeout", "planning_time_s": time_s, "warm": True, **extra})
 
 
 def test_a_failure_counts_at_the_budget_and_seeds_give_their_median():
@@ -88,7 +89,7 @@ def _write_run(run, *, seed: int, times: dict[str, list[float]], commit: str = "
                               metrics={"length_ratio": 2.0} if ok else {},
                               stats={"samples_per_edge": 99.5, "samples_per_edge_from": "counted" if planner == "rrt"
                                      else "computed", "solve_time_s": t * 0.9, "simplify_time_s": t * 0.1}))
-    (run / "trials.jsonl").write_text("\n".join(json.dumps(r) for r in lines) + "\n")
+    (run / "trials.jsonl").write_text("\n".join(json.dumps(r.to_json()) for r in lines) + "\n")
 
 
 def test_a_setting_is_read_from_its_seed_runs(tmp_path):

@@ -65,7 +65,7 @@ def test_a_failing_second_process_leaves_its_figures_to_the_first(run_dir, monke
 def test_make_plots_without_any_success(tmp_path):
     records = synthetic_records(seeds=(0,), variants=("open",), cans=1, planners=("ik", "rrt"))
     for r in records:
-        r.update(status="no_solution", path=None, metrics={})
+        r.status, r.path, r.metrics = "no_solution", None, {}
     written = make_plots(write_run(tmp_path, records, planners=("ik", "rrt"), cans=1))
     # no path to draw a profile of; the statistics figures and the scene are still drawn
     assert sorted(p.name for p in written) == sorted(

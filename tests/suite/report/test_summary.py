@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from scenes.errors import SuiteError
-from suite.run.records import metric, planners_in, problem_key, read_trials
-from suite.report.summary import write_summary
 from suite.report.outcomes import cluster_bootstrap_median_ci
+from suite.report.summary import write_summary
 from suite.report.summary_stats import paired_comparisons, summarize, wilcoxon_p
 from suite.report.summary_tables import summary_table
+from suite.run.records import TrialRecord, metric, planners_in, problem_key, read_trials
 
 Q0 = np.array([-1.57, 0.1, 0.0, -1.2, 0.0, 1.6, 0.0])
 U = np.array([1.0, 2.0, 0.0, -2.0, 0.0, 0.0, 4.0]) / 5.0  # a unit direction in joint space
@@ -44,11 +44,11 @@ def record(planner, *, seed=0, can=0, kind="transit", status="success", time_s=0
             "clearance_min_m": clearance_m,
             "duration_s": float(np.max(np.abs(seg)) / 1.5),  # slowest joint at 1.5 rad/s
         }
-    return rec
+    return TrialRecord.from_json(rec)
 
 
 def write_jsonl(path, records, tail=""):
-    path.write_text("".join(json.dumps(r) + "\n" for r in records) + tail)
+    path.write_text("".join(json.dumps(r.to_json()) + "\n" for r in records) + tail)
     return path
 
 
@@ -57,23 +57,23 @@ def write_jsonl(path, records, tail=""):
 
 def test_read_trials_ignores_a_torn_last_line(tmp_path):
     recs = [record("rrt", can=i, length_rad=1.0 + i) for i in range(3)]
-    torn = json.dumps(record("rrt", can=9, length_rad=2.0))[:57]  # the write was cut off
+    torn = json.dumps(record("rrt", can=9, length_rad=2.0).to_json())[:57]  # the write was cut off
     path = write_jsonl(tmp_path / "trials.jsonl", recs, tail=torn)
     got = read_trials(path)
-    assert [r["can_id"] for r in got] == [0, 1, 2]
+    assert [r.can_id for r in got] == [0, 1, 2]
     assert read_trials(tmp_path) == got  # the run directory works too
     assert metric(got[2], "path_length_rad") == pytest.approx(3.0)
 
 
 def test_read_trials_names_a_bad_line_that_is_not_last(tmp_path):
-    recs = [json.dumps(record("ik", can=i, length_rad=1.0)) for i in range(3)]
+    recs = [json.dumps(record("ik", can=i, length_rad=1.0).to_json()) for i in range(3)]
     (tmp_path / "trials.jsonl").write_text(recs[0] + "\n" + recs[1][:30] + "\n" + recs[2] + "\n")
     with pytest.raises(SuiteError, match="line 2 is not valid JSON"):
         read_trials(tmp_path / "trials.jsonl")
 
 
 def test_read_trials_rejects_objects_without_the_record_fields(tmp_path):
-    (tmp_path / "trials.jsonl").write_text(json.dumps(record("ik", length_rad=1.0)) + "\n{\"planner\": \"ik\"}\n\n")
+    (tmp_path / "trials.jsonl").write_text(json.dumps(record("ik", length_rad=1.0).to_json()) + "\n{\"planner\": \"ik\"}\n\n")
     with pytest.raises(SuiteError, match="line 2 lacks the field"):
         read_trials(tmp_path / "trials.jsonl")
 
@@ -214,7 +214,13 @@ def test_write_summary_files(tmp_path):
 
 
 def test_every_executed_can_has_exactly_one_fate():
-    from suite.run.records import BACK_ON_PLATE, BIN, ELSEWHERE, NOT_ATTEMPTED, fate_counts
+    from suite.run.records import (
+        BACK_ON_PLATE,
+        BIN,
+        ELSEWHERE,
+        NOT_ATTEMPTED,
+        fate_counts,
+    )
 
     cans = [{"attempted": True, "where": "bin"}, {"attempted": True, "where": "plate"},
             {"attempted": True, "where": "elsewhere"}, {"attempted": False, "where": "plate"},
@@ -229,12 +235,12 @@ def test_time_medians_leave_out_cold_trials():
     per-problem collapse and in time to solve; its success and other metrics count."""
     from suite.report.outcomes import outcomes
 
-    base = {"planner": "rrt", "status": "success", "problem": "transit", "scene_seed": 1, "variant": "wall",
-            "can_id": 0, "time_limit_s": 5.0, "metrics": {"path_length_rad": 1.0}}
-    recs = [{**base, "problem_id": "a", "planning_time_s": 9.0, "warm": False},
-            {**base, "problem_id": "a", "planning_time_s": 1.0, "warm": True},
-            {**base, "problem_id": "b", "planning_time_s": 7.0, "warm": False},
-            {**base, "problem_id": "c", "planning_time_s": 2.0}]  # a record from before the flag: warm
+    base = TrialRecord(planner="rrt", status="success", problem="transit", scene_seed=1, variant="wall", can_id=0,
+                       time_limit_s=5.0, metrics={"path_length_rad": 1.0})
+    recs = [base.with_(problem_id="a", planning_time_s=9.0, warm=False),
+            base.with_(problem_id="a", planning_time_s=1.0, warm=True),
+            base.with_(problem_id="b", planning_time_s=7.0, warm=False),
+            base.with_(problem_id="c", planning_time_s=2.0)]  # a record from before the flag: warm
     by_id = {o.key: o for o in outcomes(recs, metrics=("planning_time_s", "path_length_rad")).values()}
     times = sorted(t for o in by_id.values() if (t := o.metrics["planning_time_s"]) == t)  # NaN != NaN
     assert times == [1.0, 2.0]  # problem b's only trial was cold: no time
@@ -245,11 +251,11 @@ def test_time_medians_leave_out_cold_trials():
 def test_the_time_attribution_plot_is_drawn_only_when_a_record_attributes(tmp_path):
     from suite.report.plots_attribution import plot_time_attribution
 
-    base = {"status": "success", "problem": "transit", "scene_seed": 1, "variant": "wall", "can_id": 0,
-            "time_limit_s": 5.0, "warm": True, "planning_time_s": 1.0}
-    counted = {**base, "planner": "rrt", "problem_id": "a",
-               "attribution": {"queries": 100, "query_s": 0.8, "other_s": 0.2, "query_share": 0.8, "s_per_query": 0.008}}
-    other = {**base, "planner": "trajopt", "problem_id": "a"}
+    base = TrialRecord(planner="rrt", status="success", problem="transit", scene_seed=1, variant="wall", can_id=0,
+                       time_limit_s=5.0, warm=True, planning_time_s=1.0)
+    counted = base.with_(planner="rrt", problem_id="a", attribution={"queries": 100, "query_s": 0.8, "other_s": 0.2,
+                                                                     "query_share": 0.8, "s_per_query": 0.008})
+    other = base.with_(planner="trajopt", problem_id="a")
     assert plot_time_attribution([other], planners=["trajopt"], path=tmp_path / "none.png") is None
     p = plot_time_attribution([counted, other], planners=["rrt", "trajopt"], path=tmp_path / "att.png")
     assert p is not None and p.stat().st_size > 5_000
@@ -259,7 +265,7 @@ def test_best_known_agreement_counts_equal_paths_and_lists_certified_shorter_one
     from suite.report.summary_tables import best_known_agreement
 
     def with_best(rec, best, verdict="certified", pid="p"):
-        return {**rec, "reference_length_rad": best, "problem_id": pid, "certification": {"verdict": verdict}}
+        return rec.with_(reference_length_rad=best, problem_id=pid, certification={"verdict": verdict})
 
     recs = [with_best(record("a", seed=0, length_rad=1.0), 1.0005, pid="equal"),  # within 0.1%
             with_best(record("a", seed=1, length_rad=0.5), 1.0, pid="shorter"),  # certified, half as long
@@ -285,8 +291,8 @@ def test_search_and_simplification_are_reported_apart_for_ompl_planners():
     for i, (solve, simp, before, after) in enumerate([(0.01, 0.002, 4.0, 2.0), (0.03, 0.004, 6.0, 3.0),
                                                       (0.02, 0.003, 5.0, 4.0)]):
         r = record("rrt", seed=i, length_rad=after, time_s=solve + simp)
-        r["planner_config"] = {"simplifier": "rope", "simplify_time_s": 0.1}
-        r["stats"] = {"solve_time_s": solve, "simplify_time_s": simp, "length_before_rad": before,
+        r.planner_config = {"simplifier": "rope", "simplify_time_s": 0.1}
+        r.stats = {"solve_time_s": solve, "simplify_time_s": simp, "length_before_rad": before,
                       "length_after_rad": after}
         recs.append(r)
     recs.append(record("trajopt", seed=0, length_rad=1.0, time_s=0.3))

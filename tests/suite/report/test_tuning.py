@@ -9,13 +9,21 @@ import math
 import numpy as np
 import pytest
 
-from planners.registry import planner_class
-from planners.registry import BUILTIN
+from planners.registry import BUILTIN, planner_class
 from planners.tuned import objective, search_space, tuned_settings
 from scenes.errors import SuiteError
 from suite.cli.tune import grid, search_exclude
 from suite.problems.dataset import tuning_problems
-from suite.report.tuning import CandidateResult, choose, choose_explained, differs, evaluate, paired_ratio, weak_families
+from suite.report.tuning import (
+    CandidateResult,
+    choose,
+    choose_explained,
+    differs,
+    evaluate,
+    paired_ratio,
+    weak_families,
+)
+from suite.run.records import TrialRecord
 from suite.run.trial import make_config
 from tests.suite.report.test_summary import record
 
@@ -151,8 +159,8 @@ def test_evaluate_counts_distinct_problems_and_the_common_subset():
     slow = [record("rrt", seed=i, length_rad=2.0, time_s=0.4) for i in range(4)]
     for recs in (fast, slow):
         for r in recs:
-            if r["status"] == "success":
-                r["metrics"]["length_ratio"] = r["metrics"]["path_length_rad"]
+            if r.status == "success":
+                r.metrics["length_ratio"] = r.metrics["path_length_rad"]
     a, b = evaluate([({"range_rad": None}, fast), ({"range_rad": 1.0}, slow)])
     assert (a.solved, a.problems, b.solved) == (3, 4, 4)
     assert (a.time_to_solve_median_s, b.time_to_solve_median_s) == (pytest.approx(0.1), pytest.approx(0.4))
@@ -228,7 +236,7 @@ def test_evaluate_gives_each_family_one_vote():
     recs = [record("rrt", seed=i, length_rad=1.0, time_s=0.1) for i in range(3)]
     hard = record("rrt", seed=9, status="timeout", time_s=5.0, variant="window")
     for r in recs:
-        r["metrics"]["length_ratio"] = 1.0
+        r.metrics["length_ratio"] = 1.0
     (a,) = evaluate([({}, recs + [hard])])
     assert sorted(a.by_family) == ["open", "window"]
     assert a.family_solved_mean == pytest.approx(0.5)  # 3/3 on one family, 0/1 on the other
@@ -277,7 +285,9 @@ def test_a_candidate_over_the_offline_bound_is_out_unless_none_is_within():
 def test_offline_seconds_count_each_world_once():
     from suite.report.tuning import offline_per_world
 
-    recs = [{"stats": {"world_hash": "a", "offline_s": 30.0}}, {"stats": {"world_hash": "a", "offline_s": 30.0}},
-            {"stats": {"world_hash": "b", "offline_s": 90.0}}, {"stats": {}}, {"stats": None},
-            {"stats": {"world_hash": "c", "offline_s": 200.0, "offline_cpu_s": 80.0}}]  # CPU time where recorded
+    stats = [{"world_hash": "a", "offline_s": 30.0}, {"world_hash": "a", "offline_s": 30.0},
+             {"world_hash": "b", "offline_s": 90.0}, {}, None,
+             {"world_hash": "c", "offline_s": 200.0, "offline_cpu_s": 80.0}]  # CPU time where recorded
+    recs = [TrialRecord(planner="gcs", status="success", problem="transit", scene_seed=0, variant="open", can_id=0,
+                        stats=s) for s in stats]
     assert offline_per_world(recs) == {"a": 30.0, "b": 90.0, "c": 80.0}
