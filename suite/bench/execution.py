@@ -85,15 +85,15 @@ def world_list(text: str) -> list[str]:
 
 
 def _source_of(record: dict) -> tuple:
-    return (record.get("grasps"), json.dumps(record.get("perception"), sort_keys=True),
-            (record.get("worlds") or {}).get("planned", "truth"))
+    return (record.grasps, json.dumps(record.perception, sort_keys=True),
+            (record.worlds or {}).get("planned", "truth"))
 
 
 def run(args: argparse.Namespace) -> int:
     from planners.registry import parse_planner_list, planner_class
+    from scenes.errors import SuiteError
     from scenes.generate import generate_scene
     from scenes.spec import available_variants, load_spec
-    from scenes.errors import SuiteError
     from suite.execution.job_spec import ExecutionJob
     from suite.execution.jobs import run_jobs
     from suite.run.trial import config_dict, make_config
@@ -131,7 +131,6 @@ def run(args: argparse.Namespace) -> int:
         with open(args.json, "w") as f:
             json.dump({"executions": records}, f, indent=1)
     from suite.report.summary_execution import execution_table
-
     from suite.report.summary_perceived import paired_lines, perceived_world_lines
 
     for variant in variants:
@@ -139,22 +138,22 @@ def run(args: argparse.Namespace) -> int:
             print(f"\n{variant}, {source_label(grasps, setup, world)}{' (closed loop)' if args.reperceive else ''}:")
             want = _source_of({"grasps": grasps, "perception": None if setup is None else setup.to_json(),
                                "worlds": {"planned": world}})
-            subset = [r for r in records if r["variant"] == variant and _source_of(r) == want]
+            subset = [r for r in records if r.variant == variant and _source_of(r) == want]
             print(execution_table(subset, planners=planners, tablefmt="simple"))
             if world == "perceived":
                 print("\n".join(perceived_world_lines(subset, planners=planners)))
-        base = [r for r in records if r["variant"] == variant and _source_of(r)[0] == "truth"]
+        base = [r for r in records if r.variant == variant and _source_of(r)[0] == "truth"]
         for grasps, setup, world in sources:
             if grasps == "truth" or not base:
                 continue
             want = _source_of({"grasps": grasps, "perception": setup.to_json(), "worlds": {"planned": world}})
-            other = [r for r in records if r["variant"] == variant and _source_of(r) == want]
+            other = [r for r in records if r.variant == variant and _source_of(r) == want]
             print(f"\n{variant}: {source_label(grasps, setup, world)}, "
                   "cans in the bin per scene (paired against truth grasps in the true world):")
             print("\n".join(paired_lines(base, other, planners=planners)))
             if world == "perceived" and "truth" in worlds:  # the world's own share: same grasps, same order
                 same = _source_of({"grasps": grasps, "perception": setup.to_json(), "worlds": {"planned": "truth"}})
-                mid = [r for r in records if r["variant"] == variant and _source_of(r) == same]
+                mid = [r for r in records if r.variant == variant and _source_of(r) == same]
                 print(f"\n{variant}: {source_label(grasps, setup, world)}, paired against the same grasps "
                       "in the true world:")
                 print("\n".join(paired_lines(mid, other, planners=planners)))

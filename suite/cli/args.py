@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from collections.abc import Callable
 from typing import Any
 
@@ -91,3 +92,20 @@ def scene_from_args(args: argparse.Namespace):
     from scenes.generate import generate_scene
 
     return generate_scene(spec_from_args(args), seed=args.seed)
+
+
+def settings_file(path: str, *, flag: str) -> dict:
+    """The YAML mapping of settings a flag names (`--config`, `--moving-bin-scenario`); its fields
+    are checked by the caller's schema. A file that cannot be read, or is not a mapping, is one line."""
+    import yaml
+
+    try:
+        raw = yaml.safe_load(Path(path).read_text())
+    except OSError as exc:
+        raise SuiteError(f"cannot read {flag} {path!r}: {exc.strerror}") from None
+    except yaml.YAMLError:
+        raise SuiteError(f"{flag} {path!r} is not valid YAML") from None
+    raw = raw or {}
+    if not isinstance(raw, dict):
+        raise SuiteError(f"{flag} {path!r} must be a YAML mapping of settings")
+    return raw

@@ -15,9 +15,8 @@ import sys
 import time
 from pathlib import Path
 
-import yaml
 
-from suite.cli.args import nonneg_int, positive_float, positive_int
+from suite.cli.args import nonneg_int, positive_float, positive_int, settings_file
 from scenes.errors import SuiteError
 from scenes.schema import load
 from suite.problems import DEFAULT_TIER
@@ -123,7 +122,7 @@ def moving_bin_scenario(args: argparse.Namespace, config: CompareConfig):
                          "run them apart")
     values = {}
     if args.moving_bin_scenario:
-        values = _config_file(args.moving_bin_scenario)
+        values = settings_file(args.moving_bin_scenario, flag="--moving-bin-scenario")
         if "speed_m_s" in values:
             raise SuiteError(f"--moving-bin-scenario {args.moving_bin_scenario}: field 'speed_m_s' is set by "
                              "--moving-bin")
@@ -165,19 +164,6 @@ def _number_list(text: str, *, tp, not_a: str, each: str, twice: str) -> tuple[f
     return tuple(sorted(values))
 
 
-def _config_file(path: str) -> dict:
-    try:
-        raw = yaml.safe_load(Path(path).read_text())
-    except OSError as exc:
-        raise SuiteError(f"cannot read --config {path!r}: {exc.strerror}") from None
-    except yaml.YAMLError:
-        raise SuiteError(f"--config {path!r} is not valid YAML") from None
-    raw = raw or {}
-    if not isinstance(raw, dict):
-        raise SuiteError(f"--config {path!r} must be a YAML mapping of settings")
-    return raw  # its fields are checked with the flags' (resolve_config)
-
-
 def resolve_config(args: argparse.Namespace) -> CompareConfig:
     """Defaults < --config file < flags; every value checked before any trial runs."""
     from planners.base import BUDGET_CLOCKS
@@ -188,7 +174,7 @@ def resolve_config(args: argparse.Namespace) -> CompareConfig:
     given: dict[str, tuple[str, object]] = {}  # setting -> (where it was given, value)
     source = ""
     if args.config:
-        from_file = _config_file(args.config)
+        from_file = settings_file(args.config, flag="--config")
         values.update(from_file)
         source = f"--config {args.config}: "
         given.update({k: (f"--config {args.config} {k}", v) for k, v in from_file.items()})

@@ -6,8 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from suite.cli.args import add_planning_arguments, nonneg_float, positive_float, scene_from_args
 from scenes.errors import SuiteError
+from suite.cli.args import add_planning_arguments, nonneg_float, positive_float, scene_from_args, settings_file
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -32,22 +32,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def print_outcomes(records) -> None:
     """One line per execution: where the cans went, contacts, tracking, timing."""
     for r in records:
-        if "error" in r:
-            print(f"{r['planner']:<10} seed {r['scene_seed']:<4} error: {r['error']}")
+        if r.error is not None:
+            print(f"{r.planner:<10} seed {r.scene_seed:<4} error: {r.error}")
             continue
-        clear = "-" if r["clear_time_s"] is None else f"{r['clear_time_s']:.1f} s"
-        print(f"{r['planner']:<10} seed {r['scene_seed']:<4} in bin {r['cans_in_bin']}/{r['cans_total']}  "
-              f"plate {r['cans_on_plate']}  elsewhere {r['cans_elsewhere']}  collisions {r['collisions']}  "
-              f"peak tracking {r['peak_tracking_error_rad'] * 1e3:.1f} mrad  cleared {clear}  "
-              f"sim {r['sim_time_s']:.1f} s in {r['wall_time_s']:.1f} s ({r['real_time_factor']:.2f}x real time)"
-              + (f"  stopped: {r['stopped']}" if r["stopped"] else ""))
+        clear = "-" if r.clear_time_s is None else f"{r.clear_time_s:.1f} s"
+        print(f"{r.planner:<10} seed {r.scene_seed:<4} in bin {r.cans_in_bin}/{r.cans_total}  "
+              f"plate {r.cans_on_plate}  elsewhere {r.cans_elsewhere}  collisions {r.collisions}  "
+              f"peak tracking {r.peak_tracking_error_rad * 1e3:.1f} mrad  cleared {clear}  "
+              f"sim {r.sim_time_s:.1f} s in {r.wall_time_s:.1f} s ({r.real_time_factor:.2f}x real time)"
+              + (f"  stopped: {r.stopped}" if r.stopped else ""))
 
 
 def run(args: argparse.Namespace) -> int:
     from planners.registry import planner_class
-    from suite.execution.job_spec import ExecutionJob
-    from suite.execution.jobs import run_jobs, write_execution
     from suite.execution.config import CONTACT_MODELS, ExecutionConfig
+    from suite.execution.execution_records import write_execution
+    from suite.execution.job_spec import ExecutionJob
+    from suite.execution.jobs import run_jobs
     from suite.run.trial import config_dict, make_config
 
     cls = planner_class(args.planner)  # unknown names fail here, listing the known ones
@@ -87,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     path = write_execution(out, records)
     print_outcomes(records)
     print(f"wrote {path}" + ("" if args.no_replay else f" and {job.replay_path}"), file=sys.stderr)
-    return 0 if all("error" not in r for r in records) else 1
+    return 0 if all(r.error is None for r in records) else 1
 
 
 def _moving_bin(args: argparse.Namespace, scene, out: Path, cls, config) -> int:
@@ -95,9 +96,8 @@ def _moving_bin(args: argparse.Namespace, scene, out: Path, cls, config) -> int:
     moving-bin loop in physics."""
     from scenes.moving_bin import make_scenario
     from scenes.moving_bin_check import check_scenario
-    from suite.cli.compare import _config_file
+    from suite.execution.execution_records import write_moving_bin
     from suite.execution.jobs import run_jobs
-    from suite.execution.jobs import write_moving_bin
     from suite.execution.moving_bin import plan_scene_job, run_moving_bin_job
     from suite.run.trial import config_dict, make_config
 
@@ -105,7 +105,7 @@ def _moving_bin(args: argparse.Namespace, scene, out: Path, cls, config) -> int:
         raise SuiteError("--moving-bin-scenario needs --moving-bin SPEED")
     if args.reperceive:
         raise SuiteError("--moving-bin cannot go with --reperceive: run them apart")
-    values = _config_file(args.moving_bin_scenario) if args.moving_bin_scenario else {}
+    values = settings_file(args.moving_bin_scenario, flag="--moving-bin-scenario") if args.moving_bin_scenario else {}
     if "speed_m_s" in values:
         raise SuiteError(f"--moving-bin-scenario {args.moving_bin_scenario}: field 'speed_m_s' is set by --moving-bin")
     where = f"--moving-bin-scenario {args.moving_bin_scenario}: " if args.moving_bin_scenario else "moving bin: "
@@ -120,7 +120,7 @@ def _moving_bin(args: argparse.Namespace, scene, out: Path, cls, config) -> int:
     path = write_moving_bin(out, [record])
     print_moving_bin([record])
     print(f"wrote {path}" + (f" and {replay}" if replay else ""), file=sys.stderr)
-    return 0 if record["status"] != "error" else 1
+    return 0 if record.status != "error" else 1
 
 
 def print_moving_bin(records) -> None:
@@ -129,13 +129,13 @@ def print_moving_bin(records) -> None:
         return "-" if v is None else format(v, fmt)
 
     for r in records:
-        head = f"{r['planner']:<10} seed {r['scene_seed']:<4} bin {r['speed_m_s']:g} m/s"
-        if r["status"] != "ok":
-            print(f"{head}  {r['status']}: {r['reason']}")
+        head = f"{r.planner:<10} seed {r.scene_seed:<4} bin {r.speed_m_s:g} m/s"
+        if r.status != "ok":
+            print(f"{head}  {r.status}: {r.reason}")
             continue
-        print(f"{head}  in bin {r['cans_in_bin']}/{r['cans_total']}  replans {r['replans']} "
-              f"(spliced {r['splices']}, missed {r['deadline_misses']}, failed {r['replan_failures']})  "
-              f"latency median {f(r['replan_latency_median_s'], '.3f')} s p95 {f(r['replan_latency_p95_s'], '.3f')} s  "
-              f"contacts bin {r['contacts_bin']} person {r['contacts_person']}  "
-              f"grasp-release {f(r['grasp_to_release_median_s'], '.2f')} s"
-              + (f"  stopped: {r['stopped']}" if r["stopped"] else ""))
+        print(f"{head}  in bin {r.cans_in_bin}/{r.cans_total}  replans {r.replans} "
+              f"(spliced {r.splices}, missed {r.deadline_misses}, failed {r.replan_failures})  "
+              f"latency median {f(r.replan_latency_median_s, '.3f')} s p95 {f(r.replan_latency_p95_s, '.3f')} s  "
+              f"contacts bin {r.contacts_bin} person {r.contacts_person}  "
+              f"grasp-release {f(r.grasp_to_release_median_s, '.2f')} s"
+              + (f"  stopped: {r.stopped}" if r.stopped else ""))

@@ -32,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
         raise SuiteError(f"{args.run!r} holds no {TRIALS_FILE}: not a run directory (the report is built from a "
                          "run's trial records)")
     if not (run_dir / "plots").is_dir() and not args.no_plots:
-        from suite.execution.jobs import read_execution
+        from suite.execution.execution_records import read_execution
         from suite.report.budgets import budgets_in, by_budget_view
         from suite.report.plots import make_plots
         from suite.run.records import read_trials

@@ -9,7 +9,6 @@ executed passed the same validation and TOPP-RA timing as in a comparison trial.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import sys
 from pathlib import Path
@@ -19,19 +18,17 @@ import numpy as np
 
 from planners.base import PROBLEM_KINDS
 from scenes.scene import Scene
+from suite.execution.execution_records import ExecutionRecord
 from suite.execution.job_spec import ExecutionJob
+from suite.execution.moving_bin_records import MovingBinRecord
 from suite.execution.plan_loop import closed_loop, open_loop, plan_open_loop
 from suite.execution.simulate import execute_cycles
+from suite.run.records import TrialRecord
 
 log = logging.getLogger(__name__)
 
-EXECUTION_FILE = "execution.json"
-#: A run's moving-bin episodes (`suite.execution.moving_bin.MovingBinRecord.to_json` each).
-MOVING_BIN_FILE = "moving_bin.json"
-
-
-def run_execution(job: ExecutionJob) -> dict[str, Any]:
-    """Plan if needed, execute in physics, write the replay; the outcome as a JSON record."""
+def run_execution(job: ExecutionJob) -> ExecutionRecord:
+    """Plan if needed, execute in physics, write the replay; the outcome as a record (built as its JSON)."""
     from suite.problems.cycle import build_problems
     from suite.run.runner import plan_world_for, scene_task
 
@@ -79,7 +76,7 @@ def run_execution(job: ExecutionJob) -> dict[str, Any]:
     if meshcat is not None:
         Path(job.replay_path).write_text(meshcat.StaticHtml(), encoding="utf-8")
         record["replay"] = Path(job.replay_path).name
-    return record
+    return ExecutionRecord.from_json(record)
 
 
 def meshcat_for(scene: Scene):
@@ -95,7 +92,7 @@ def meshcat_for(scene: Scene):
     return meshcat
 
 
-def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str, time_limit_s: float,
+def jobs_from_records(trials, records: Sequence[TrialRecord], *, grasps: str, time_limit_s: float,
                       seed: int, reperceive: bool, replay_dir: Path | None,
                       cycle_steps: dict | None = None, shared_steps: dict | None = None,
                       picking_orders: dict | None = None, world: str | None = None) -> list[ExecutionJob]:
@@ -114,7 +111,7 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
             in id order).
     """
 
-    by_id = {r["trial_id"]: r for r in records}
+    by_id = {r.trial_id: r for r in records}
     groups: dict[tuple[str, str], list] = {}
     scenes: dict[str, Scene] = {}
     configs: dict[str, dict] = {}
@@ -125,14 +122,14 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
         configs[t.planner] = t.planner_config
     steps = cycle_steps or {}
     shared = shared_steps or {}
-    by_problem = {(r["planner"], r.get("problem_id")): r for r in records if r.get("problem_id")}
+    by_problem = {(r.planner, r.problem_id): r for r in records if r.problem_id}
     jobs, replayed = [], set()
     for (planner, key), specs in groups.items():
         by_can: dict[int, dict[str, Any]] = {}
         for t in specs:
             rec = by_id.get(t.trial_id)
-            status = rec["status"] if rec else "not run"
-            by_can.setdefault(t.problem.can_id, {})[t.problem.kind] = (rec["path"] if status == "success" else None,
+            status = rec.status if rec else "not run"
+            by_can.setdefault(t.problem.can_id, {})[t.problem.kind] = (rec.path if status == "success" else None,
                                                                      t.problem.q_start, status)
         cans: dict[int, list] = {}
         q_home = None
@@ -146,8 +143,8 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
                     path, status = [list(q_start), list(q_goal)], "success"
                 elif (planner, shared.get((key, can_id, kind))) in by_problem:  # planned once, for another scene
                     rec = by_problem[(planner, shared[(key, can_id, kind)])]
-                    status = rec["status"]
-                    path, q_start = (rec["path"] if status == "success" else None), rec["q_start"]
+                    status = rec.status
+                    path, q_start = (rec.path if status == "success" else None), rec.q_start
                 else:
                     path, q_start, status = None, None, "not in the dataset"
                 if q_home is None and q_start is not None:
@@ -168,25 +165,8 @@ def jobs_from_records(trials, records: Sequence[dict[str, Any]], *, grasps: str,
     return jobs
 
 
-def write_execution(out: Path, records: Sequence[dict[str, Any]]) -> Path:
-    """Write the run's execution.json (atomically: a torn write never replaces a good file)."""
-    path = Path(out) / EXECUTION_FILE
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"executions": list(records)}, indent=1), encoding="utf-8")
-    tmp.replace(path)
-    return path
-
-
-def read_execution(run_dir: str | Path) -> list[dict[str, Any]]:
-    """The execution records of a run ([] when it was not executed)."""
-    path = Path(run_dir) / EXECUTION_FILE
-    if not path.exists():
-        return []
-    return json.loads(path.read_text(encoding="utf-8"))["executions"]
-
-
 def run_jobs(jobs: Sequence[Any], *, workers: int, progress_bar: bool = True, run=None,
-             desc: str = "execution") -> list[dict[str, Any]]:
+             desc: str = "execution") -> list[ExecutionRecord | MovingBinRecord]:
     """Run execution jobs in `workers` spawned processes; records in the jobs' order. `run` is the
     module-level function that runs one job and returns its record (default `run_execution`; it
     catches its own errors, as `suite.execution.moving_bin.run_moving_bin_job` does)."""
@@ -198,7 +178,7 @@ def run_jobs(jobs: Sequence[Any], *, workers: int, progress_bar: bool = True, ru
     from suite.run.interrupt import signals_blocked
     from suite.run.runner import worker_init
 
-    results: list[dict[str, Any] | None] = [None] * len(jobs)
+    results: list[ExecutionRecord | MovingBinRecord | None] = [None] * len(jobs)
     bar = tqdm(total=len(jobs), desc=desc, unit="run", disable=not progress_bar,
                file=sys.stderr, dynamic_ncols=True)
     if workers <= 1 or len(jobs) <= 1:
@@ -216,20 +196,18 @@ def run_jobs(jobs: Sequence[Any], *, workers: int, progress_bar: bool = True, ru
                 try:
                     results[i] = fut.result()
                 except Exception as exc:  # the worker process died
-                    results[i] = _failed(jobs[i], f"{type(exc).__name__}: {exc}")
-                    if run is not None:  # a moving-bin episode's record
-                        scenario = getattr(jobs[i], "scenario", None)
-                        results[i].update(status="error", reason=results[i]["error"],
-                                          speed_m_s=getattr(scenario, "speed_m_s", None))
+                    message = f"{type(exc).__name__}: {exc}"
+                    # a moving-bin episode's record (its job makes it), else an execution's
+                    results[i] = jobs[i].record("error", message) if run is not None else _failed(jobs[i], message)
                 rec = results[i]
-                bar.set_postfix_str(f"{rec['planner']} seed {rec['scene_seed']}: "
-                                    f"{rec.get('cans_in_bin', 0)}/{rec['cans_total']} in bin", refresh=False)
+                bar.set_postfix_str(f"{rec.planner} seed {rec.scene_seed}: {rec.cans_in_bin}/{rec.cans_total} in bin",
+                                    refresh=False)
                 bar.update(1)
     bar.close()
     return [r for r in results if r is not None]
 
 
-def _guarded(job: ExecutionJob) -> dict[str, Any]:
+def _guarded(job: ExecutionJob) -> ExecutionRecord:
     try:
         return run_execution(job)
     except Exception as exc:  # one failed simulation is that run's error, not the whole run's
@@ -237,29 +215,9 @@ def _guarded(job: ExecutionJob) -> dict[str, Any]:
         return _failed(job, f"{type(exc).__name__}: {exc}")
 
 
-def _failed(job: ExecutionJob, message: str) -> dict[str, Any]:
-    return {"planner": job.planner, "scene_seed": job.scene.seed, "variant": job.scene.variant,
+def _failed(job: ExecutionJob, message: str) -> ExecutionRecord:
+    return ExecutionRecord.from_json({"planner": job.planner, "scene_seed": job.scene.seed, "variant": job.scene.variant,
             "cans_total": len(job.scene.cans), "error": message, "grasps": getattr(job, "grasps", None),
             "reperceive": getattr(job, "reperceive", False),
             **({"perception": job.perception.to_json()}
-               if getattr(job, "perception", None) is not None and getattr(job, "grasps", None) == "perceived" else {})}
-
-
-def write_moving_bin(out: Path, records: Sequence[dict[str, Any]]) -> Path:
-    """Write the run's moving_bin.json (atomically)."""
-    from suite.execution.moving_bin_records import FORMAT_VERSION
-
-    path = Path(out) / MOVING_BIN_FILE
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"format_version": FORMAT_VERSION, "moving_bin": list(records)}, indent=1),
-                   encoding="utf-8")
-    tmp.replace(path)
-    return path
-
-
-def read_moving_bin(run_dir) -> list[dict[str, Any]]:
-    """The moving-bin records of a run ([] when it ran none)."""
-    path = Path(run_dir) / MOVING_BIN_FILE
-    if not path.exists():
-        return []
-    return json.loads(path.read_text(encoding="utf-8"))["moving_bin"]
+               if getattr(job, "perception", None) is not None and getattr(job, "grasps", None) == "perceived" else {})})

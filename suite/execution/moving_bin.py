@@ -20,7 +20,12 @@ from scenes.moving_bin import MovingBinScenario
 from scenes.moving_bin_check import check_scenario
 from scenes.scene import Scene
 from suite.execution.config import ExecutionConfig
-from suite.execution.moving_bin_records import NOT_APPLICABLE, MovingBinJob, MovingBinRecord, episode_seed
+from suite.execution.moving_bin_records import (
+    NOT_APPLICABLE,
+    MovingBinJob,
+    MovingBinRecord,
+    episode_seed,
+)
 
 log = logging.getLogger(__name__)
 
@@ -59,14 +64,14 @@ def run_moving_bin(job: MovingBinJob, *, planner=None) -> MovingBinRecord:
     return record
 
 
-def run_moving_bin_job(job: MovingBinJob) -> dict[str, Any]:
-    """`run_moving_bin` as a JSON record; an exception is that episode's error record."""
+def run_moving_bin_job(job: MovingBinJob) -> MovingBinRecord:
+    """`run_moving_bin`'s record; an exception is that episode's error record."""
     try:
-        return run_moving_bin(job).to_json()
+        return run_moving_bin(job)
     except Exception as exc:  # one failed episode is its record's error, not the whole run's
         log.debug("moving bin episode of %s on seed %d failed", job.planner, job.scene.seed, exc_info=True)
         return job.record("error", f"{type(exc).__name__}: {exc}",
-                          error_state=getattr(exc, "moving_bin_state", None)).to_json()
+                          error_state=getattr(exc, "moving_bin_state", None))
 
 
 def plan_scene_job(scene: Scene, scenario: MovingBinScenario, *, planner: str, planner_config: dict[str, Any],
@@ -85,9 +90,9 @@ def plan_scene_job(scene: Scene, scenario: MovingBinScenario, *, planner: str, p
         paths, failed = [], ""
         for problem in chunk[:3]:  # approach, descend, lift; the transit and return are planned online
             rec = run_problem(problem, planner=planner, planner_config=planner_config, run_seed=seed)
-            ok = rec["status"] == "success"
-            paths.append(rec["path"] if ok else None)
-            failed = failed or ("" if ok else f"{problem.kind} {rec['status']}")
+            ok = rec.succeeded
+            paths.append(rec.path if ok else None)
+            failed = failed or ("" if ok else f"{problem.kind} {rec.status}")
         cans.append((chunk[0].can_id, (*paths, None, None), failed))
     scenario = dataclasses.replace(scenario, seed=episode_seed(seed, scene.seed, 0, scenario.seed))
     return MovingBinJob(planner=planner, planner_config=planner_config, scene=scene, scenario=scenario,

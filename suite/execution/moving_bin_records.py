@@ -51,6 +51,17 @@ def modelled_latency(scenario: MovingBinScenario, planner: str) -> float:
     return float(declared.get(planner, MODELLED_LATENCY_S.get(planner, DEFAULT_MODELLED_LATENCY_S)))
 
 
+#: The counts a record of format 1 (or 2, for the last two) does not have.
+COUNTED_SINCE_V2 = ("cans_put_down", "cans_not_attempted", "failures_by_stage", "splices_at_rest", "releases_moving",
+                    "near_misses_person", "ssm_holds", "escapes", "release_updates")
+
+
+def _known(cls, obj: dict[str, Any]) -> dict[str, Any]:
+    """The keys of a JSON object that are fields of the dataclass `cls`."""
+    names = {f.name for f in dataclasses.fields(cls)}
+    return {k: v for k, v in obj.items() if k in names}
+
+
 def _rounded(out: dict) -> dict:
     for k, v in out.items():
         if isinstance(v, float):
@@ -153,15 +164,15 @@ class MovingBinRecord:
     cans_in_bin: int = 0
     cans_released: int = 0
     cans_given_up: int = 0
-    cans_put_down: int = 0
-    cans_not_attempted: int = 0
+    cans_put_down: int | None = 0
+    cans_not_attempted: int | None = 0
     replans: int = 0
     splices: int = 0
-    splices_at_rest: int = 0
+    splices_at_rest: int | None = 0
     splice_speed_median_rad_s: float | None = None
     deadline_misses: int = 0
     replan_failures: int = 0
-    failures_by_stage: dict[str, int] = dataclasses.field(default_factory=dict)
+    failures_by_stage: dict[str, int] | None = dataclasses.field(default_factory=dict)
     replan_latency_median_s: float | None = None
     replan_latency_p95_s: float | None = None
     plan_latency_median_s: float | None = None
@@ -169,15 +180,15 @@ class MovingBinRecord:
     splice_jump_q_rad: float | None = None
     splice_jump_v_rad_s: float | None = None
     grasp_to_release_median_s: float | None = None
-    releases_moving: int = 0
-    release_updates: int = 0
+    releases_moving: int | None = 0
+    release_updates: int | None = 0
     release_speed_median_m_s: float | None = None
     contacts_bin: int = 0
     contacts_person: int = 0
     person_min_distance_m: float | None = None
-    near_misses_person: int = 0
-    ssm_holds: int = 0
-    escapes: int = 0
+    near_misses_person: int | None = 0
+    ssm_holds: int | None = 0
+    escapes: int | None = 0
     collisions: int = 0
     sim_time_s: float = 0.0
     wall_time_s: float | None = 0.0
@@ -192,6 +203,19 @@ class MovingBinRecord:
     @property
     def replans_per_can(self) -> float | None:
         return self.replans / self.cans_attempted if self.cans_attempted else None
+
+    @classmethod
+    def from_json(cls, obj: dict[str, Any]) -> MovingBinRecord:
+        """A record of moving_bin.json, of this format or an earlier one (its missing fields at
+        their defaults; `replans_per_can` is worked out, not read)."""
+        known = _known(cls, obj)
+        # a count an earlier format did not keep is None (not recorded), not 0: the tables leave it out
+        known.update((name, None) for name in COUNTED_SINCE_V2 if name not in obj)
+        known["cans"] = tuple(CanEpisode(**_known(CanEpisode, c)) for c in obj.get("cans") or ())
+        known["events"] = tuple(ReplanEvent(**_known(ReplanEvent, e)) for e in obj.get("events") or ())
+        for name in ("fates", "contact_events"):
+            known[name] = tuple(obj.get(name) or ())
+        return cls(**known)
 
     def to_json(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}

@@ -12,10 +12,9 @@ import numpy as np
 from planners.base import PROBLEM_KINDS, PlanningProblem
 from scenes.scene import CanPose, Scene
 from suite.execution.commands import WorldState, planned_ahead, timed_cycle
-from suite.execution.monitor import where
-from suite.run.records import FINAL_RETURN_NOT_EXECUTED
-
+from suite.execution.execution_records import FINAL_RETURN_NOT_EXECUTED
 from suite.execution.job_spec import ExecutionJob
+from suite.execution.monitor import where
 
 
 def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob,
@@ -31,15 +30,15 @@ def plan_cans(problems: Sequence[PlanningProblem], job: ExecutionJob,
         paths, failed = [], ""
         for problem in chunk:
             rec = run_problem(problem, planner=job.planner, planner_config=job.planner_config, run_seed=job.seed)
-            ok = rec["status"] == "success"
-            paths.append(rec["path"] if ok else None)
-            found = rec.get("stats", {}).get("perception_induced")
-            if planning_s is not None and rec.get("planning_time_s") is not None:
-                planning_s.append(float(rec["planning_time_s"]))
+            ok = rec.succeeded
+            paths.append(rec.path if ok else None)
+            found = rec.stats.get("perception_induced")
+            if planning_s is not None and rec.planning_time_s is not None:
+                planning_s.append(float(rec.planning_time_s))
             if found is not None and induced is not None:
                 induced.append({"can": problem.can_id, "kind": problem.kind, **found})
             if not ok and not failed:
-                failed = f"{problem.kind} {rec['status']}" + (f" (perception-induced: {found['cause']})" if found else "")
+                failed = f"{problem.kind} {rec.status}" + (f" (perception-induced: {found['cause']})" if found else "")
         out.append((chunk[0].can_id, tuple(paths), failed))
     return out
 
@@ -127,7 +126,13 @@ def closed_loop(job: ExecutionJob, induced: list, worlds: list, planning_s: list
     grasps the truth of where the cans are builds the judge's scene only; the loop ends when the
     cameras see no can where none was tried. Perception-induced failures go to `induced`, each
     world's summary to `worlds`."""
-    from perception.pipeline import GRASP_CAMERA, PerceptionSetup, detect_cans, detect_in_frames, noise_rng
+    from perception.pipeline import (
+        GRASP_CAMERA,
+        PerceptionSetup,
+        detect_cans,
+        detect_in_frames,
+        noise_rng,
+    )
     from perception.side_view import SIDE_CAMERAS
     from scenes.grasp_rule import truth_grasp
     from scenes.render import render

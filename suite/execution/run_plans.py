@@ -40,7 +40,8 @@ def _execution_jobs(trials, out: Path, config: CompareConfig, *, reperceive: boo
 
 def execute_run(trials, out: Path, config: CompareConfig, *, reperceive: bool, progress_bar: bool) -> None:
     """Execute every planner's plans for every scene in physics; write execution.json."""
-    from suite.execution.jobs import run_jobs, write_execution
+    from suite.execution.execution_records import write_execution
+    from suite.execution.jobs import run_jobs
 
     jobs = _execution_jobs(trials, out, config, reperceive=reperceive, replay_dir=out)
     print(f"executing {len(jobs)} plan(s) in physics ({'closed loop' if reperceive else 'open loop'})...",
@@ -53,7 +54,8 @@ def execute_moving_bin(trials, out: Path, config: CompareConfig, *, speeds, scen
     """The moving-bin sweep: every planner on the run's first open and wall scenes, on `paths` bin
     paths each, at every speed; write moving_bin.json (and a replay of each planner's episode on
     the first scene at the middle speed); the manifest records the scenario (its latency mode)."""
-    from suite.execution.jobs import run_jobs, write_moving_bin
+    from suite.execution.execution_records import write_moving_bin
+    from suite.execution.jobs import run_jobs
     from suite.execution.moving_bin import run_moving_bin_job, sweep_jobs
     from suite.execution.moving_bin_records import modelled_latency
     from suite.run.manifest import update_manifest

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from scenes.errors import SuiteError
+from suite.execution.execution_records import read_execution
 
 REFERENCE_RUN = Path("results") / "reference"
 #: The peers run: the suite's `rrt`, `roboplan-rrt` and the imported `mplib` rows, one run.
@@ -102,10 +103,10 @@ def answer_table(root: Path) -> str:
     cans: dict[str, list[int]] = {}
     execution = run / "execution.json"
     if execution.is_file():
-        for e in json.loads(execution.read_text(encoding="utf-8")).get("executions", []):
-            c = cans.setdefault(e["planner"], [0, 0])
-            c[0] += int(e.get("cans_in_bin", 0))
-            c[1] += int(e.get("cans_total", 0))
+        for e in read_execution(execution.parent):
+            c = cans.setdefault(e.planner, [0, 0])
+            c[0] += int(e.cans_in_bin)
+            c[1] += int(e.cans_total)
     lines = [("| planner | success (95% CI) | exact verdict: certified / unproved / collision | time to solve (s) "
               "| length / best known; post-processing | min clearance (mm) | cans in the bin, in physics |"),
              "|---|---|---|---|---|---|---|"]
@@ -267,25 +268,30 @@ PERCEIVED_EXECUTION = PERCEPTION_RUNS / "execution-93000" / "execution.json"
 def perceived_execution_table(root: Path) -> str:
     """docs/perception.md: cans in the bin per grasp source and planner, from `PERCEIVED_EXECUTION`."""
     from perception.pipeline import PerceptionSetup
-    from suite.run.records import BACK_ON_PLATE, ELSEWHERE, NOT_ATTEMPTED, fate_counts
+    from suite.execution.execution_records import (
+        BACK_ON_PLATE,
+        ELSEWHERE,
+        NOT_ATTEMPTED,
+        fate_counts,
+    )
 
-    records = json.loads((root / PERCEIVED_EXECUTION).read_text(encoding="utf-8"))["executions"]
+    records = read_execution((root / PERCEIVED_EXECUTION).parent)
     lines = ["| grasps | planner | scenes (seeds) | cans in bin | not attempted | picked, not in bin "
              "| unintended contacts | errors |", "|---|---|---|---|---|---|---|---|"]
     groups: dict[tuple, list] = {}
     for r in records:
-        p = r.get("perception") if r["grasps"] == "perceived" else None
-        label = r["grasps"] if p is None else f"{r['grasps']} ({PerceptionSetup(**p).label()})"
-        groups.setdefault((label, r["planner"]), []).append(r)
+        p = r.perception if r.grasps == "perceived" else None
+        label = r.grasps if p is None else f"{r.grasps} ({PerceptionSetup(**p).label()})"
+        groups.setdefault((label, r.planner), []).append(r)
     for (label, planner), runs in groups.items():
-        ok = [r for r in runs if "error" not in r]
-        seeds = sorted(r["scene_seed"] for r in runs)
-        total = sum(r["cans_total"] for r in runs)
-        in_bin = sum(r["cans_in_bin"] for r in ok)
+        ok = [r for r in runs if r.error is None]
+        seeds = sorted(r.scene_seed for r in runs)
+        total = sum(r.cans_total for r in runs)
+        in_bin = sum(r.cans_in_bin for r in ok)
         fates = fate_counts(ok)
         cells = [label, f"`{planner}`", f"{len(runs)} ({seeds[0]}-{seeds[-1]})", f"{in_bin}/{total}",
                  str(fates[NOT_ATTEMPTED]), str(fates[BACK_ON_PLATE] + fates[ELSEWHERE]),
-                 str(sum(r["collisions"] for r in ok)), str(len(runs) - len(ok))]
+                 str(sum(r.collisions for r in ok)), str(len(runs) - len(ok))]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

@@ -95,7 +95,7 @@ def plot_jobs(run_dir: str | Path, *, records: Sequence[dict] | None = None, exe
     jobs.append((plot_time_attribution, (records,), {**common, "path": out_dir / "time_attribution.png"}))
     if executions:
         jobs.append((plot_execution, (executions,), {**common, "path": out_dir / "execution.png"}))
-    from suite.execution.jobs import read_moving_bin
+    from suite.execution.execution_records import read_moving_bin
 
     moving = read_moving_bin(run_dir)
     if moving:

@@ -35,8 +35,8 @@ def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: P
     speeds = sorted({c.speed_m_s for c in cells})
     at = {v: i for i, v in enumerate(speeds)}
     modes = list(dict.fromkeys((c.latency_mode, c.release_mode) for c in cells))
-    deadline = next((r["scenario"]["replan_deadline_s"] for r in records
-                     if isinstance(r.get("scenario"), dict) and "replan_deadline_s" in r["scenario"]), None)
+    deadline = next((r.scenario["replan_deadline_s"] for r in records
+                     if isinstance(r.scenario, dict) and "replan_deadline_s" in r.scenario), None)
     fig, axes = plt.subplots(2, 3, figsize=(15, 8.2))
     (a_bin, a_pair, a_lat), (a_miss, a_lost, a_hit) = axes
     lines = [(p, m) for p in shown for m in modes if any(c.planner == p and (c.latency_mode, c.release_mode) == m
@@ -99,13 +99,13 @@ def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: P
         if ax is not a_pair:
             ax.set_xticks(range(len(speeds)), [f"{v:g}" for v in speeds])
             ax.set_xlim(-0.5, len(speeds) - 0.5)
-    scenes = len({(r["variant"], r["scene_seed"]) for r in records})
+    scenes = len({(r.variant, r.scene_seed) for r in records})
     handles, labels = a_bin.get_legend_handles_labels()
     fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.97), ncol=min(len(labels), 6),
                fontsize=9, frameon=False)
     fig.suptitle(f"Moving bin: {scenes} scene{'s' * (scenes != 1)}, every planner through the same replanning loop "
                  "(one point per planner and speed, over its episodes)", fontsize=11, y=0.995)
-    na = {r["planner"]: r["reason"] for r in records if r.get("status") == "not_applicable"}
+    na = {r.planner: r.reason for r in records if r.status == "not_applicable"}
     if na:
         fig.text(0.01, 0.005, "Not applicable: " + "; ".join(f"{p} ({why})" for p, why in na.items()), fontsize=8,
                  ha="left", va="bottom", wrap=True)

@@ -8,14 +8,14 @@ from typing import Any
 import numpy as np
 from tabulate import tabulate
 
-from suite.report.summary_tables import format_number
-from suite.run.records import (
+from suite.execution.execution_records import (
     BACK_ON_PLATE,
     ELSEWHERE,
     FINAL_RETURN_NOT_EXECUTED,
     NOT_ATTEMPTED,
     fate_counts,
 )
+from suite.report.summary_tables import format_number
 
 EXECUTION_INTRO = """## Execution in physics
 
@@ -43,33 +43,33 @@ def execution_rows(executions: Sequence[dict[str, Any]], *, planners: Sequence[s
     "fully planned" counts the scenes whose every problem was planned, and the cans recycled in
     those scenes: the figure that judges execution apart from planning failures.
     """
-    planners = list(planners) if planners is not None else list(dict.fromkeys(e["planner"] for e in executions))
+    planners = list(planners) if planners is not None else list(dict.fromkeys(e.planner for e in executions))
     headers = ["planner", "scenes", "cans in bin", "not attempted", "picked, on plate", "elsewhere",
                "fully planned: in bin",
                "collisions", "peak tracking (mrad)", "peak slip (mm)", "clear time (s)", "real-time factor", "errors"]
     rows = []
     for p in planners:
-        runs = [e for e in executions if e["planner"] == p]
-        ok = [e for e in runs if "error" not in e]
+        runs = [e for e in executions if e.planner == p]
+        ok = [e for e in runs if e.error is None]
         if not runs:
             continue
-        total = sum(e["cans_total"] for e in runs)
-        in_bin = sum(e["cans_in_bin"] for e in ok)
-        full = [e for e in ok if (not e["stopped"] or FINAL_RETURN_NOT_EXECUTED in e["stopped"])
-                and e["cans_attempted"] == e["cans_total"]]
-        full_total = sum(e["cans_total"] for e in full)
-        full_bin = sum(e["cans_in_bin"] for e in full)
-        clear = [e["clear_time_s"] for e in ok if e["clear_time_s"] is not None]
+        total = sum(e.cans_total for e in runs)
+        in_bin = sum(e.cans_in_bin for e in ok)
+        full = [e for e in ok if (not e.stopped or FINAL_RETURN_NOT_EXECUTED in e.stopped)
+                and e.cans_attempted == e.cans_total]
+        full_total = sum(e.cans_total for e in full)
+        full_bin = sum(e.cans_in_bin for e in full)
+        clear = [e.clear_time_s for e in ok if e.clear_time_s is not None]
         fates = fate_counts(ok)
         rows.append([
             p, len(runs), f"{in_bin}/{total} ({100 * in_bin / max(total, 1):.0f}%)",
             fates[NOT_ATTEMPTED], fates[BACK_ON_PLATE], fates[ELSEWHERE],
             f"{full_bin}/{full_total} in {len(full)} scenes" if full else "-",
-            sum(e["collisions"] for e in ok),
-            format_number(1e3 * max((e["peak_tracking_error_rad"] for e in ok), default=float("nan"))),
-            format_number(1e3 * max((e.get("peak_slip_m", float("nan")) for e in ok), default=float("nan"))),
+            sum(e.collisions for e in ok),
+            format_number(1e3 * max((e.peak_tracking_error_rad for e in ok), default=float("nan"))),
+            format_number(1e3 * max(((e.peak_slip_m if e.peak_slip_m is not None else float("nan")) for e in ok), default=float("nan"))),
             format_number(float(np.median(clear))) if clear else "-",
-            format_number(float(np.median([e["real_time_factor"] for e in ok]))) if ok else "-",
+            format_number(float(np.median([e.real_time_factor for e in ok]))) if ok else "-",
             len(runs) - len(ok),
         ])
     return headers, rows

@@ -67,12 +67,12 @@ STEPS = ("world", "blend", "ik", "plan", "join", "validate", "person", "timing")
 def _deadline_bound(e: dict[str, Any]) -> bool:
     """A replan under a deadline: one with a deadline, or a drift or arrival replan (in modelled
     mode these carry none); not the first transit, a return or a put-down, which the arm waits for."""
-    return e.get("deadline_s") is not None or e.get("trigger") in ("drift", "arrival", "resume")
+    return e.deadline_s is not None or e.trigger in ("drift", "arrival", "resume")
 
 
 def _total(rs: Sequence[dict[str, Any]], key: str) -> int | None:
     """The sum of an integer field over the records carrying it; None if none does (an older record)."""
-    values = [r[key] for r in rs if r.get(key) is not None]
+    values = [getattr(r, key) for r in rs if getattr(r, key) is not None]
     return int(sum(values)) if values else None
 
 
@@ -131,7 +131,7 @@ class SpeedCell:
 
 
 def _stages(rs: Sequence[dict[str, Any]]) -> dict[str, int] | None:
-    tables = [r["failures_by_stage"] for r in rs if isinstance(r.get("failures_by_stage"), dict)]
+    tables = [r.failures_by_stage for r in rs if isinstance(r.failures_by_stage, dict)]
     if not tables:
         return None
     out: dict[str, int] = {}
@@ -147,13 +147,13 @@ def _splice_speeds(rs: Sequence[dict[str, Any]]) -> tuple[float, ...]:
     lack it, its median over every splice."""
     out: list[float] = []
     for r in rs:
-        per_event = [e["splice_speed_rad_s"] for e in r.get("events", ())
-                     if e.get("outcome") == "spliced" and e.get("trigger") == "drift"
-                     and e.get("splice_speed_rad_s") is not None]
+        per_event = [e.splice_speed_rad_s for e in r.events
+                     if e.outcome == "spliced" and e.trigger == "drift"
+                     and e.splice_speed_rad_s is not None]
         if per_event:
             out += per_event
-        elif r.get("splice_speed_median_rad_s") is not None:
-            out.append(r["splice_speed_median_rad_s"])
+        elif r.splice_speed_median_rad_s is not None:
+            out.append(r.splice_speed_median_rad_s)
     return tuple(out)
 
 
@@ -162,48 +162,48 @@ def speed_cells(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | 
     mode and release mode, the episodes' totals (over the episodes with status ok)."""
     out = []
     for p in planner_order(records, planners):
-        mine = [r for r in records if r["planner"] == p and r.get("speed_m_s") is not None]
-        groups = sorted({(float(r["speed_m_s"]), latency_mode(r), release_mode(r)) for r in mine})
+        mine = [r for r in records if r.planner == p and r.speed_m_s is not None]
+        groups = sorted({(float(r.speed_m_s), latency_mode(r), release_mode(r)) for r in mine})
         for v, lat, rel in groups:
-            rs = [r for r in mine if (float(r["speed_m_s"]), latency_mode(r), release_mode(r)) == (v, lat, rel)]
-            ok = [r for r in rs if r.get("status") == "ok"]
-            na = next((r["reason"] for r in rs if r.get("status") == "not_applicable"), "")
-            k, attempted = sum(r["cans_in_bin"] for r in ok), sum(r["cans_attempted"] for r in ok)
-            offered = sum(r["cans_total"] for r in rs if r.get("status") in ("ok", "error"))
-            events = [e for r in ok for e in r.get("events", ()) if _deadline_bound(e)]
-            spliced = [e for e in events if e["outcome"] == "spliced"]
+            rs = [r for r in mine if (float(r.speed_m_s), latency_mode(r), release_mode(r)) == (v, lat, rel)]
+            ok = [r for r in rs if r.status == "ok"]
+            na = next((r.reason for r in rs if r.status == "not_applicable"), "")
+            k, attempted = sum(r.cans_in_bin for r in ok), sum(r.cans_attempted for r in ok)
+            offered = sum(r.cans_total for r in rs if r.status in ("ok", "error"))
+            events = [e for r in ok for e in r.events if _deadline_bound(e)]
+            spliced = [e for e in events if e.outcome == "spliced"]
             out.append(SpeedCell(
-                planner=p, speed_m_s=v, episodes=len(rs), cans_in_bin=k, cans_total=sum(r["cans_total"] for r in ok),
+                planner=p, speed_m_s=v, episodes=len(rs), cans_in_bin=k, cans_total=sum(r.cans_total for r in ok),
                 ci95=wilson_interval(k, offered), cans_offered=offered,
-                replans=sum(r["replans"] for r in ok), cans_attempted=attempted,
-                deadline_misses=sum(r["deadline_misses"] for r in ok),
-                replan_failures=sum(r["replan_failures"] for r in ok),
-                latencies_s=tuple(e["latency_s"] for e in events),
-                contacts_bin=sum(r["contacts_bin"] for r in ok), contacts_person=sum(r["contacts_person"] for r in ok),
-                jump_q_rad=max((e["jump_q_rad"] for e in spliced if e.get("jump_q_rad") is not None),
+                replans=sum(r.replans for r in ok), cans_attempted=attempted,
+                deadline_misses=sum(r.deadline_misses for r in ok),
+                replan_failures=sum(r.replan_failures for r in ok),
+                latencies_s=tuple(e.latency_s for e in events),
+                contacts_bin=sum(r.contacts_bin for r in ok), contacts_person=sum(r.contacts_person for r in ok),
+                jump_q_rad=max((e.jump_q_rad for e in spliced if e.jump_q_rad is not None),
                                default=math.nan),
-                jump_v_rad_s=max((e["jump_v_rad_s"] for e in spliced if e.get("jump_v_rad_s") is not None),
+                jump_v_rad_s=max((e.jump_v_rad_s for e in spliced if e.jump_v_rad_s is not None),
                                  default=math.nan),
-                grasp_to_release_s=tuple(c["grasp_to_release_s"] for r in ok for c in r.get("cans", ())
-                                         if c["released"] and c.get("grasp_to_release_s") is not None),
-                given_up=sum(r.get("cans_given_up", 0) for r in ok), not_applicable=na,
-                errors=sum(r.get("status") == "error" for r in rs),
+                grasp_to_release_s=tuple(c.grasp_to_release_s for r in ok for c in r.cans
+                                         if c.released and c.grasp_to_release_s is not None),
+                given_up=sum(r.cans_given_up for r in ok), not_applicable=na,
+                errors=sum(r.status == "error" for r in rs),
                 latency_mode=lat, release_mode=rel,
-                splices=sum(r.get("splices", 0) for r in ok),
-                cans_released=sum(r.get("cans_released", 0) for r in ok),
-                not_attempted=sum(r["cans_not_attempted"] if r.get("cans_not_attempted") is not None
-                                  else max(0, r["cans_total"] - r["cans_attempted"]) for r in ok),
+                splices=sum(r.splices for r in ok),
+                cans_released=sum(r.cans_released for r in ok),
+                not_attempted=sum(r.cans_not_attempted if r.cans_not_attempted is not None
+                                  else max(0, r.cans_total - r.cans_attempted) for r in ok),
                 put_down=_total(ok, "cans_put_down"),
                 failures_by_stage=_stages(ok),
                 splices_at_rest=_total(ok, "splices_at_rest"),
                 splice_speeds_rad_s=_splice_speeds(ok),
                 releases_moving=_total(ok, "releases_moving"),
-                release_speeds_m_s=tuple(r["release_speed_median_m_s"] for r in ok
-                                         if r.get("release_speed_median_m_s") is not None),
+                release_speeds_m_s=tuple(r.release_speed_median_m_s for r in ok
+                                         if r.release_speed_median_m_s is not None),
                 near_misses_person=_total(ok, "near_misses_person"),
                 ssm_holds=_total(ok, "ssm_holds"),
-                person_min_distance_m=min((r["person_min_distance_m"] for r in ok
-                                           if r.get("person_min_distance_m") is not None), default=None),
+                person_min_distance_m=min((r.person_min_distance_m for r in ok
+                                           if r.person_min_distance_m is not None), default=None),
                 escapes=_total(ok, "escapes"), release_updates=_total(ok, "release_updates")))
     return out
 
@@ -335,22 +335,22 @@ def latency_table(records: Sequence[dict[str, Any]], planners: Sequence[str] | N
                   ) -> tuple[list[str], list[list[Any]], set[str]]:
     """The per-step latency table (headers, rows) and where its numbers come from ("events",
     "episodes"); no rows when no measured-latency record has step times."""
-    measured = [r for r in records if r.get("status") == "ok" and latency_mode(r) == "measured"]
+    measured = [r for r in records if r.status == "ok" and latency_mode(r) == "measured"]
     per_planner: dict[str, tuple[str, dict[str, list[float]], list[float], int]] = {}
     for p in planner_order(measured, planners):
-        rs = [r for r in measured if r["planner"] == p]
-        events = [e for r in rs for e in r.get("events", ()) if _deadline_bound(e) and e.get("parts_s")]
+        rs = [r for r in measured if r.planner == p]
+        events = [e for r in rs for e in r.events if _deadline_bound(e) and e.parts_s]
         if events:
-            steps = {s: [e["parts_s"][s] for e in events if e["parts_s"].get(s) is not None]
-                     for s in _steps_in([e["parts_s"] for e in events])}
-            per_planner[p] = ("events", steps, [e["latency_s"] for e in events], len(events))
+            steps = {s: [e.parts_s[s] for e in events if e.parts_s.get(s) is not None]
+                     for s in _steps_in([e.parts_s for e in events])}
+            per_planner[p] = ("events", steps, [e.latency_s for e in events], len(events))
             continue
-        summaries = [r for r in rs if r.get("latency_parts_s")]
+        summaries = [r for r in rs if r.latency_parts_s]
         if summaries:
-            tables = [r["latency_parts_s"] for r in summaries]
+            tables = [r.latency_parts_s for r in summaries]
             steps = {s: [t[s] for t in tables if t.get(s) is not None] for s in _steps_in(tables)}
-            total = [(r["replan_latency_median_s"], r.get("replan_latency_p95_s")) for r in summaries
-                     if r.get("replan_latency_median_s") is not None]
+            total = [(r.replan_latency_median_s, r.replan_latency_p95_s) for r in summaries
+                     if r.replan_latency_median_s is not None]
             per_planner[p] = ("episodes", steps, total, len(summaries))
     if not per_planner:
         return [], [], set()

@@ -44,25 +44,25 @@ BOOTSTRAP_SEED = 0
 
 def latency_mode(r: dict[str, Any]) -> str:
     """An episode's latency mode, "measured" for a record written before modes were named."""
-    return r.get("latency_mode") or "measured"
+    return r.latency_mode or "measured"
 
 
 def release_mode(r: dict[str, Any]) -> str:
     """An episode's release mode, "rest" for a record written before releases on the move."""
-    return r.get("release_mode") or "rest"
+    return r.release_mode or "rest"
 
 
 def planner_order(records: Sequence[dict[str, Any]], planners: Sequence[str] | None) -> list[str]:
     """The planners of the records: those of `planners` in its order, then the others as they come."""
-    present = list(dict.fromkeys(r["planner"] for r in records))
+    present = list(dict.fromkeys(r.planner for r in records))
     order = [p for p in (planners or ()) if p in present]
     return order + [p for p in present if p not in order]  # the records' own planners too
 
 
 def episode_key(r: dict[str, Any]) -> tuple:
     """What every planner meets in the same way: the scene, the bin path, the speed and the modes."""
-    return (r.get("variant"), r.get("scene_seed"), r.get("bin_seed"), int(r.get("path_index") or 0),
-            float(r["speed_m_s"]), latency_mode(r), release_mode(r))
+    return (r.variant, r.scene_seed, r.bin_seed, int(r.path_index or 0),
+            float(r.speed_m_s), latency_mode(r), release_mode(r))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,10 +122,10 @@ def _episode_rates(records: Sequence[dict[str, Any]], planner: str) -> dict[tupl
     which delivers none of the cans it did not finish; a key met twice takes the mean)."""
     by_key: dict[tuple, list[float]] = {}
     for r in records:
-        if r["planner"] == planner and r.get("status") in ("ok", "error") and r.get("cans_total") \
-                and r.get("speed_m_s") is not None:
-            delivered = r.get("cans_in_bin", 0) if r.get("status") == "ok" else 0
-            by_key.setdefault(episode_key(r), []).append(delivered / r["cans_total"])
+        if r.planner == planner and r.status in ("ok", "error") and r.cans_total \
+                and r.speed_m_s is not None:
+            delivered = r.cans_in_bin if r.status == "ok" else 0
+            by_key.setdefault(episode_key(r), []).append(delivered / r.cans_total)
     return {k: float(np.mean(v)) for k, v in by_key.items()}
 
 

@@ -47,12 +47,12 @@ def write_report(run_dir: str | Path, *, plots: bool = True, html: bool = True, 
     planners = planners_in(records, read_manifest(run_dir))
     import numpy as np
 
-    from suite.execution.jobs import read_execution
+    from suite.execution.execution_records import read_execution
     from suite.report.summary_execution import execution_table
     from suite.report.summary_stats import paired_comparisons, summarize_run
 
     executions = read_execution(run_dir)
-    from suite.execution.jobs import read_moving_bin
+    from suite.execution.execution_records import read_moving_bin
     from suite.report.summary_moving_bin import moving_bin_table
 
     moving = read_moving_bin(run_dir)

@@ -18,7 +18,12 @@ import numpy as np
 
 from planners.base import STATUS_CAUSE, FailureReason, PlanStatus
 from scenes.errors import SuiteError
-from suite.run.formats import MANIFEST_FORMAT_VERSION, RECORD_FORMAT_VERSION, check_version
+from suite.run.formats import (
+    MANIFEST_FORMAT_VERSION,
+    RECORD_FORMAT_VERSION,
+    check_version,
+)
+from suite.run.json_record import JsonRecord
 
 log = logging.getLogger(__name__)
 
@@ -39,13 +44,16 @@ REQUIRED_FIELDS = ("planner", "status", "problem", "scene_seed", "variant", "can
 
 
 @dataclasses.dataclass(eq=False)
-class TrialRecord:
+class TrialRecord(JsonRecord):
     """One trial's record: one line of `trials.jsonl`, as the runner (`suite.run.trial`) writes it.
 
     The fields are in the order the runner writes them. A field a line does not have keeps its
     default (None, or empty); a key this version does not name is kept in `extra`, so a record read
-    and written back (`to_json`) is the line it was, key order included.
+    and written back (`to_json`) is the line it was, key order included (`JsonRecord`).
     """
+
+    ALWAYS_WRITTEN = REQUIRED_FIELDS
+
 
     planner: str
     status: str
@@ -95,41 +103,6 @@ class TrialRecord:
     reason_code: str | None = None
     attribution: dict[str, Any] | None = None
     worlds: dict[str, Any] | None = None
-    #: keys of the line this version does not name (kept for the round trip)
-    extra: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
-    #: the line's keys in its order (empty for a record made in memory)
-    keys: tuple[str, ...] = dataclasses.field(default=(), repr=False)
-
-    @classmethod
-    def from_json(cls, obj: dict[str, Any]) -> TrialRecord:
-        """A record from one parsed line (its REQUIRED_FIELDS present; the caller checks them)."""
-        named = {k: v for k, v in obj.items() if k in _RECORD_FIELDS}
-        return cls(**named, extra={k: v for k, v in obj.items() if k not in _RECORD_FIELDS}, keys=tuple(obj))
-
-    def to_json(self) -> dict[str, Any]:
-        """The line's JSON object: the keys it was read with, in their order, then any field set since."""
-        out: dict[str, Any] = {}
-        for key in self.keys:
-            out[key] = getattr(self, key) if key in _RECORD_FIELDS else self.extra[key]
-        for f in _FIELDS_WRITTEN:
-            if f.name in out:
-                continue
-            value = getattr(self, f.name)
-            if f.name in REQUIRED_FIELDS or value != (f.default_factory() if f.default_factory is not
-                                                      dataclasses.MISSING else f.default):
-                out[f.name] = value
-        out.update((k, v) for k, v in self.extra.items() if k not in out)
-        return out
-
-    def __eq__(self, other: object) -> bool:
-        """Two records are equal when their JSON is (whatever order the keys were read in)."""
-        return isinstance(other, TrialRecord) and self.to_json() == other.to_json()
-
-    __hash__ = None  # type: ignore[assignment]  # mutable, compared by value
-
-    def with_(self, **changes: Any) -> TrialRecord:
-        """A copy with some fields changed (the stats and metrics dicts copied, not shared)."""
-        return dataclasses.replace(self, **{"stats": dict(self.stats), "metrics": dict(self.metrics), **changes})
 
     @property
     def succeeded(self) -> bool:
@@ -137,8 +110,7 @@ class TrialRecord:
         return self.status == SUCCESS
 
 
-_FIELDS_WRITTEN = tuple(f for f in dataclasses.fields(TrialRecord) if f.name not in ("extra", "keys"))
-_RECORD_FIELDS = frozenset(f.name for f in _FIELDS_WRITTEN)
+_RECORD_FIELDS = frozenset(f.name for f in TrialRecord.json_fields())
 
 #: Metrics that are fields of the record itself rather than of its "metrics" dict.
 TOP_LEVEL_METRICS = ("planning_time_s",)
@@ -360,27 +332,3 @@ def statuses_in(records: Iterable[TrialRecord]) -> list[str]:
     """The statuses present, in the order of `STATUSES` (unknown ones last, sorted)."""
     present = {str(r.status) for r in records}
     return [s for s in STATUSES if s in present] + sorted(present - set(STATUSES))
-
-
-#: Where a can ended after physics execution: every can of execution.json has exactly one fate.
-BIN, BACK_ON_PLATE, ELSEWHERE, NOT_ATTEMPTED = "in the bin", "picked, back on the plate", "elsewhere", "not attempted"
-CAN_FATES = (BIN, BACK_ON_PLATE, ELSEWHERE, NOT_ATTEMPTED)
-#: An execution's `stopped` note when only the last can's return (after its drop) had no plan: every
-#: can was still attempted, so the scene counts as fully planned.
-FINAL_RETURN_NOT_EXECUTED = "final return not executed"
-
-
-def can_fate(can: dict[str, Any]) -> str:
-    """The fate of one can record of an execution ("where" it ended and whether it was attempted)."""
-    if can["where"] in ("bin", "elsewhere"):
-        return BIN if can["where"] == "bin" else ELSEWHERE
-    return BACK_ON_PLATE if can["attempted"] else NOT_ATTEMPTED
-
-
-def fate_counts(executions: Iterable[dict[str, Any]]) -> dict[str, int]:
-    """How many cans of these executions met each fate."""
-    counts = dict.fromkeys(CAN_FATES, 0)
-    for e in executions:
-        for c in e.get("cans", ()):
-            counts[can_fate(c)] += 1
-    return counts

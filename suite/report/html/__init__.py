@@ -55,7 +55,7 @@ def write_html(
     """
     import numpy as np
 
-    from suite.execution.jobs import read_execution
+    from suite.execution.execution_records import read_execution
     from suite.report.budgets import by_budget_view
     from suite.report.summary_stats import paired_comparisons, summarize_run
     from suite.run.records import planners_in, read_manifest, read_trials

@@ -92,7 +92,7 @@ def render(
         nav.append(("execution", "Execution"))
         body.append(_section("execution", "Execution in physics",
                              sections.execution_html(run_dir, executions, planners)))
-    from suite.execution.jobs import read_moving_bin
+    from suite.execution.execution_records import read_moving_bin
 
     moving = read_moving_bin(run_dir)
     if moving:

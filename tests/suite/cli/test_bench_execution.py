@@ -136,5 +136,5 @@ def test_perceived_kinect_grasps_recycle_a_can_in_physics():
     setup = PerceptionSetup(pipeline="robust", sensor="kinect-v1")
     rec = run_execution(ExecutionJob("rrt", config_dict(make_config(planner_class("rrt"), None)), scene,
                                      "perceived", 5.0, scene.seed, perception=setup))
-    assert rec["perception"] == setup.to_json()
-    assert rec["cans_in_bin"] == 1, rec
+    assert rec.perception == setup.to_json()
+    assert rec.cans_in_bin == 1, rec

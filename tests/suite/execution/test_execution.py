@@ -11,10 +11,11 @@ from scenes.generate import generate_scene
 from scenes.grasp_rule import truth_grasp
 from scenes.spec import load_spec
 from suite.execution.job_spec import ExecutionJob
-from suite.execution.plan_loop import can_pose_from, open_loop, plan_cans
 from suite.execution.monitor import bin_region, where
+from suite.execution.plan_loop import can_pose_from, open_loop, plan_cans
 from suite.execution.simulate import execute_cycles
 from suite.problems.cycle import build_problems
+from suite.run.records import TrialRecord
 from suite.run.trial import config_dict, make_config
 
 
@@ -127,13 +128,13 @@ def test_reperceive_picks_a_moved_can_from_where_it_really_is():
     assert stale.cans[1].where != "bin"
 
     closed = run_execution(ExecutionJob("rrt", config, actual, "perceived", 5.0, actual.seed, reperceive=True))
-    assert closed["cans_in_bin"] == 2, closed
+    assert closed.cans_in_bin == 2, closed
     # planned in the world the cameras saw, rebuilt after the pick; judged and simulated in the truth
-    assert closed["worlds"] == {"planned": "perceived", "judged": "truth", "physics": "truth"}
+    assert closed.worlds == {"planned": "perceived", "judged": "truth", "physics": "truth"}
     # the loop ends on what the cameras see: a last look finds the plate empty
-    assert [w["cans"] for w in closed["perceived_worlds"]] == [2, 1, 0]
-    assert closed["stopped"] == ""
-    assert closed["perception_induced"] == []
+    assert [w["cans"] for w in closed.perceived_worlds] == [2, 1, 0]
+    assert closed.stopped == ""
+    assert closed.perception_induced == []
 
 
 def _cli(*args):
@@ -186,8 +187,9 @@ def test_dataset_execution_picks_cans_whose_steps_are_all_outside_the_benchmark(
     key = mine[0].scene.key()
     assert {p.can_id for p in mine} < set(ds.picking_orders[key])  # some cans have no benchmark problem
     trials = [TrialSpec(f"t{i}", "rrt", {}, p) for i, p in enumerate(mine)]
-    records = [{"trial_id": t.trial_id, "planner": "rrt", "status": "success", "problem_id": None,
-                "path": [list(t.problem.q_start), list(t.problem.q_goal)], "q_start": list(t.problem.q_start)}
+    records = [TrialRecord(planner="rrt", status="success", problem=t.problem.kind, scene_seed=1, variant="open",
+                           can_id=t.problem.can_id, trial_id=t.trial_id,
+                           path=[list(t.problem.q_start), list(t.problem.q_goal)], q_start=list(t.problem.q_start))
                for t in trials]
     (job,) = jobs_from_records(trials, records, grasps="truth", time_limit_s=5.0, seed=0, reperceive=False,
                                replay_dir=None, cycle_steps=ds.cycle_steps, picking_orders=ds.picking_orders)

@@ -384,10 +384,11 @@ def test_modelled_latency_gives_the_same_records_twice():
                                         latency_mode="modelled")) for p in ("rrt", "trajopt")]
 
     first, second = sweep(), sweep()
-    assert all(r["status"] == "ok" and r["latency_mode"] == "modelled" for r in first)
-    assert all(r["wall_time_s"] is None and r["latency_parts_s"] == {} for r in first)
-    assert sum(r["replans"] for r in first) > 0
-    assert json.dumps(first, sort_keys=True) == json.dumps(second, sort_keys=True)
+    assert all(r.status == "ok" and r.latency_mode == "modelled" for r in first)
+    assert all(r.wall_time_s is None and r.latency_parts_s == {} for r in first)
+    assert sum(r.replans for r in first) > 0
+    assert [json.dumps(r.to_json(), sort_keys=True) for r in first] == [json.dumps(r.to_json(), sort_keys=True)
+                                                                         for r in second]
 
 
 # --- the command ----------------------------------------------------------------------------------

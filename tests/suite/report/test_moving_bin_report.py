@@ -1,5 +1,6 @@
 """The moving-bin section of a run's report, from moving_bin.json alone."""
 
+import dataclasses
 import itertools
 import math
 
@@ -7,7 +8,8 @@ import numpy as np
 import pytest
 from synthetic_runs import synthetic_records, write_run
 
-from suite.execution.jobs import read_moving_bin, write_moving_bin
+from suite.execution.execution_records import read_moving_bin, write_moving_bin
+from suite.execution.moving_bin_records import MovingBinRecord
 from suite.report.summary_moving_bin import (
     latency_rows,
     moving_bin_rows,
@@ -46,7 +48,7 @@ def _records():
                 "cans_released": 0, "cans_given_up": 0, "replans": 0, "splices": 0, "deadline_misses": 0,
                 "replan_failures": 0, "contacts_bin": 0, "contacts_person": 0, "collisions": 0, "stopped": "",
                 "cans": [], "fates": [], "events": [], "contact_events": [], "replay": None}
-        out.append({**base, "planner": "rrt", "status": "ok", "cans_attempted": 2, "cans_in_bin": in_bin,
+        out.append(MovingBinRecord.from_json({**base, "planner": "rrt", "status": "ok", "cans_attempted": 2, "cans_in_bin": in_bin,
                     "cans_released": 2, "replans": len(events),
                     "splices": sum(e["outcome"] == "spliced" for e in events),
                     "deadline_misses": sum(e["outcome"] == "missed" for e in events),
@@ -54,19 +56,19 @@ def _records():
                     "cans": [{"can_id": 0, "released": True, "grasp_to_release_s": 2.0, "release_offset_m": 0.01,
                               "gave_up": ""},
                              {"can_id": 1, "released": True, "grasp_to_release_s": 3.0, "release_offset_m": 0.02,
-                              "gave_up": ""}]})
-        out.append({**base, "planner": "gcs", "status": "not_applicable",
-                    "reason": "its convex regions are built offline for one fixed world"})
+                              "gave_up": ""}]}))
+        out.append(MovingBinRecord.from_json({**base, "planner": "gcs", "status": "not_applicable",
+                                              "reason": "its convex regions are built offline for one fixed world"}))
     return out
 
 
 def _old(records):
-    """The records as an older moving_bin.json holds them: none of the newer fields."""
+    """The records as read from an older moving_bin.json: none of the newer fields (their defaults)."""
     out = []
-    for r in records:
-        r = {k: v for k, v in r.items() if k not in NEW_RECORD_FIELDS}
-        r["events"] = [{k: v for k, v in e.items() if k not in NEW_EVENT_FIELDS} for e in r.get("events", ())]
-        out.append(r)
+    for rec in records:
+        r = {k: v for k, v in rec.to_json().items() if k not in NEW_RECORD_FIELDS}
+        r["events"] = [{k: v for k, v in e.items() if k not in NEW_EVENT_FIELDS} for e in r["events"]]
+        out.append(MovingBinRecord.from_json(r))
     return out
 
 
@@ -94,7 +96,7 @@ def _record(planner, *, bin_seed, in_bin, attempted, speed=0.2, scene_seed=1000,
          "releases_moving": in_bin, "release_speed_median_m_s": None, "person_min_distance_m": 0.5,
          "near_misses_person": 0, "ssm_holds": 0, "error_state": None}
     r.update(fields)
-    return r
+    return MovingBinRecord.from_json(r)
 
 
 def _sweep_records(planners=("ik", "rrt", "trajopt"), speeds=(0.0, 0.1, 0.2, 0.4), paths=3):
@@ -156,7 +158,7 @@ def test_moving_bin_cells_count_cans_latency_and_misses(tmp_path):
 
 def test_the_headline_is_per_can_offered_and_old_records_render_without_the_new_columns():
     old = _old(_records())
-    old[2] = {**old[2], "cans_total": 4, "cans_attempted": 2, "cans_given_up": 1}  # rrt at 0.2: 2 cans never tried
+    old[2] = dataclasses.replace(old[2], cans_total=4, cans_attempted=2, cans_given_up=1)  # rrt at 0.2: 2 never tried
     headers, rows = moving_bin_rows(old)
     row = next(r for r in rows if r[:2] == ["rrt", "0.2"])
     assert row[headers.index("cans in bin / offered")] == "1/4 (25% [5, 70])"  # the cans never tried count
@@ -331,7 +333,7 @@ def test_the_latency_table_comes_from_the_events_step_times():
     assert by["rrt"]["ik"] == "20 / 70" and by["rrt"]["world"] == "-" and by["rrt"]["total"] == "60 / 120"
     text = moving_bin_table(records, planners=("ik", "rrt", "trajopt"))
     assert "Replan latency per step" in text and "the median of their medians" in text
-    only_modelled = [r for r in records if r["planner"] == "trajopt"]
+    only_modelled = [r for r in records if r.planner == "trajopt"]
     assert latency_rows(only_modelled) == ([], [])
     assert "Replan latency per step" not in moving_bin_table(only_modelled)
 

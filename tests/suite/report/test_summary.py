@@ -214,18 +214,20 @@ def test_write_summary_files(tmp_path):
 
 
 def test_every_executed_can_has_exactly_one_fate():
-    from suite.run.records import (
+    from suite.execution.execution_records import (
         BACK_ON_PLATE,
         BIN,
         ELSEWHERE,
         NOT_ATTEMPTED,
+        ExecutionCan,
+        ExecutionRecord,
         fate_counts,
     )
 
-    cans = [{"attempted": True, "where": "bin"}, {"attempted": True, "where": "plate"},
-            {"attempted": True, "where": "elsewhere"}, {"attempted": False, "where": "plate"},
-            {"attempted": False, "where": "elsewhere"}]  # knocked off the plate before its turn
-    counts = fate_counts([{"cans": cans}])
+    cans = [ExecutionCan(0, True, "bin"), ExecutionCan(1, True, "plate"), ExecutionCan(2, True, "elsewhere"),
+            ExecutionCan(3, False, "plate"),
+            ExecutionCan(4, False, "elsewhere")]  # knocked off the plate before its turn
+    counts = fate_counts([ExecutionRecord("rrt", 0, "open", cans_total=5, cans=cans)])
     assert counts == {BIN: 1, BACK_ON_PLATE: 1, ELSEWHERE: 2, NOT_ATTEMPTED: 1}
     assert sum(counts.values()) == len(cans)
 
