@@ -19,6 +19,7 @@ import json
 import time
 
 from suite.cli.args import add_noise_arguments, nonneg_float, nonneg_int, positive_int
+from suite.execution.execution_records import ExecutionRecord
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -84,9 +85,14 @@ def world_list(text: str) -> list[str]:
     return list(dict.fromkeys(worlds))
 
 
-def _source_of(record: dict) -> tuple:
-    return (record.grasps, json.dumps(record.perception, sort_keys=True),
-            (record.worlds or {}).get("planned", "truth"))
+def _source(grasps: str | None, perception: dict | None, planned: str) -> tuple:
+    """A grasp source as a key: the grasps, the perception setup's JSON and the world planned in."""
+    return (grasps, json.dumps(perception, sort_keys=True), planned)
+
+
+def _source_of(record: ExecutionRecord) -> tuple:
+    """The grasp source an execution record was run with (`_source`)."""
+    return _source(record.grasps, record.perception, (record.worlds or {}).get("planned", "truth"))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -129,15 +135,14 @@ def run(args: argparse.Namespace) -> int:
     print(f"done in {time.perf_counter() - t0:.0f} s wall")
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"executions": records}, f, indent=1)
+            json.dump({"executions": [r.to_json() for r in records]}, f, indent=1)
     from suite.report.summary_execution import execution_table
     from suite.report.summary_perceived import paired_lines, perceived_world_lines
 
     for variant in variants:
         for grasps, setup, world in sources:
             print(f"\n{variant}, {source_label(grasps, setup, world)}{' (closed loop)' if args.reperceive else ''}:")
-            want = _source_of({"grasps": grasps, "perception": None if setup is None else setup.to_json(),
-                               "worlds": {"planned": world}})
+            want = _source(grasps, None if setup is None else setup.to_json(), world)
             subset = [r for r in records if r.variant == variant and _source_of(r) == want]
             print(execution_table(subset, planners=planners, tablefmt="simple"))
             if world == "perceived":
@@ -146,13 +151,13 @@ def run(args: argparse.Namespace) -> int:
         for grasps, setup, world in sources:
             if grasps == "truth" or not base:
                 continue
-            want = _source_of({"grasps": grasps, "perception": setup.to_json(), "worlds": {"planned": world}})
+            want = _source(grasps, setup.to_json(), world)
             other = [r for r in records if r.variant == variant and _source_of(r) == want]
             print(f"\n{variant}: {source_label(grasps, setup, world)}, "
                   "cans in the bin per scene (paired against truth grasps in the true world):")
             print("\n".join(paired_lines(base, other, planners=planners)))
             if world == "perceived" and "truth" in worlds:  # the world's own share: same grasps, same order
-                same = _source_of({"grasps": grasps, "perception": setup.to_json(), "worlds": {"planned": "truth"}})
+                same = _source(grasps, setup.to_json(), "truth")
                 mid = [r for r in records if r.variant == variant and _source_of(r) == same]
                 print(f"\n{variant}: {source_label(grasps, setup, world)}, paired against the same grasps "
                       "in the true world:")

@@ -19,6 +19,7 @@ from suite.execution.moving_bin_records import (
     FORMAT_VERSION as MOVING_BIN_FORMAT_VERSION,
 )
 from suite.execution.moving_bin_records import MovingBinRecord
+from suite.run.formats import check_version
 from suite.run.json_record import JsonRecord
 
 EXECUTION_FILE = "execution.json"
@@ -118,11 +119,17 @@ def write_moving_bin(out: str | Path, records: Sequence[MovingBinRecord]) -> Pat
 
 def read_moving_bin(run_dir: str | Path) -> list[MovingBinRecord]:
     """The moving-bin records of a run ([] when it ran none); an older format's missing fields get
-    their defaults."""
+    their defaults.
+
+    Raises:
+        SuiteError: the file is of a newer format than this suite reads.
+    """
     path = Path(run_dir) / MOVING_BIN_FILE
     if not path.exists():
         return []
-    return [MovingBinRecord.from_json(r) for r in json.loads(path.read_text(encoding="utf-8"))["moving_bin"]]
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    check_version(doc, supported=MOVING_BIN_FORMAT_VERSION, what="moving-bin records", where=str(path))
+    return [MovingBinRecord.from_json(r) for r in doc["moving_bin"]]
 
 
 #: Where a can ended after physics execution: every can of execution.json has exactly one fate.

@@ -27,6 +27,7 @@ from suite.run.records import TrialRecord
 
 log = logging.getLogger(__name__)
 
+
 def run_execution(job: ExecutionJob) -> ExecutionRecord:
     """Plan if needed, execute in physics, write the replay; the outcome as a record (built as its JSON)."""
     from suite.problems.cycle import build_problems
@@ -216,8 +217,10 @@ def _guarded(job: ExecutionJob) -> ExecutionRecord:
 
 
 def _failed(job: ExecutionJob, message: str) -> ExecutionRecord:
-    return ExecutionRecord.from_json({"planner": job.planner, "scene_seed": job.scene.seed, "variant": job.scene.variant,
-            "cans_total": len(job.scene.cans), "error": message, "grasps": getattr(job, "grasps", None),
-            "reperceive": getattr(job, "reperceive", False),
-            **({"perception": job.perception.to_json()}
-               if getattr(job, "perception", None) is not None and getattr(job, "grasps", None) == "perceived" else {})})
+    """The record of an execution that raised: the counts it knew and the error."""
+    perceived = getattr(job, "perception", None) is not None and getattr(job, "grasps", None) == "perceived"
+    return ExecutionRecord.from_json({
+        "planner": job.planner, "scene_seed": job.scene.seed, "variant": job.scene.variant,
+        "cans_total": len(job.scene.cans), "error": message, "grasps": getattr(job, "grasps", None),
+        "reperceive": getattr(job, "reperceive", False),
+        **({"perception": job.perception.to_json()} if perceived else {})})

@@ -199,6 +199,8 @@ class MovingBinRecord:
     events: tuple[ReplanEvent, ...] = ()
     contact_events: tuple[dict, ...] = ()
     replay: str | None = None
+    #: keys of the JSON object this version does not name (kept, and written back after the fields)
+    extra: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
 
     @property
     def replans_per_can(self) -> float | None:
@@ -208,7 +210,8 @@ class MovingBinRecord:
     def from_json(cls, obj: dict[str, Any]) -> MovingBinRecord:
         """A record of moving_bin.json, of this format or an earlier one (its missing fields at
         their defaults; `replans_per_can` is worked out, not read)."""
-        known = _known(cls, obj)
+        known = {k: v for k, v in _known(cls, obj).items() if k != "extra"}
+        known["extra"] = {k: v for k, v in obj.items() if k not in known and k != "replans_per_can"}
         # a count an earlier format did not keep is None (not recorded), not 0: the tables leave it out
         known.update((name, None) for name in COUNTED_SINCE_V2 if name not in obj)
         known["cans"] = tuple(CanEpisode(**_known(CanEpisode, c)) for c in obj.get("cans") or ())
@@ -218,14 +221,14 @@ class MovingBinRecord:
         return cls(**known)
 
     def to_json(self) -> dict:
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "extra"}
         out["cans"] = [c.to_json() for c in self.cans]
         out["events"] = [e.to_json() for e in self.events]
         out["fates"] = list(self.fates)
         out["contact_events"] = list(self.contact_events)
         out["replans_per_can"] = self.replans_per_can
         out["latency_parts_s"] = {k: [round(x, 5) for x in v] for k, v in self.latency_parts_s.items()}
-        return _rounded(out)
+        return {**_rounded(out), **{k: v for k, v in self.extra.items() if k not in out}}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -13,12 +13,13 @@ from suite.execution.execution_records import (
     CAN_FATES,
     ELSEWHERE,
     NOT_ATTEMPTED,
+    ExecutionRecord,
     fate_counts,
 )
 from suite.report.plots_common import planner_colors, plt, save_figure
 
 
-def plot_execution(executions: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path:
+def plot_execution(executions: Sequence[ExecutionRecord], *, planners: Sequence[str], path: Path) -> Path:
     """Cans recycled per planner after physics execution: stacked bars of where the cans ended."""
     planners = [p for p in planners if any(e.planner == p for e in executions)]
     colors = {BIN: "#2e8b57", BACK_ON_PLATE: "#f0a202", ELSEWHERE: "#d62728", NOT_ATTEMPTED: "#c8c8c8"}

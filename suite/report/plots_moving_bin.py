@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from suite.execution.moving_bin_records import MovingBinRecord
 from suite.report.plots_common import planner_colors, plt, save_figure
 from suite.report.summary_moving_bin import speed_cells
 from suite.report.summary_moving_bin_paired import paired_differences
@@ -20,7 +21,7 @@ PAIR_STYLES = (("#393b79", "o"), ("#843c39", "s"), ("#637939", "D"), ("#7b4173",
 MODE_MARKERS = ("o", "s", "^", "D")
 
 
-def plot_moving_bin(records: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path | None:
+def plot_moving_bin(records: Sequence[MovingBinRecord], *, planners: Sequence[str], path: Path) -> Path | None:
     """Six panels against bin speed (equally spaced categories), one line per planner (and mode):
     cans in the bin per can offered (95% Wilson intervals); the paired differences between
     planners (mean over shared episodes, 95% bootstrap interval; filled where it excludes 0);
@@ -123,7 +124,7 @@ def _mode_label(mode: tuple[str, str], modes: Sequence[tuple[str, str]]) -> str:
     return f" ({', '.join(parts)})" if parts else ""
 
 
-def _paired_panel(ax, records: Sequence[dict], *, planners: Sequence[str], at: dict[float, int]) -> None:
+def _paired_panel(ax, records: Sequence[MovingBinRecord], *, planners: Sequence[str], at: dict[float, int]) -> None:
     """Mean paired difference (pp) per pair of planners against speed, its 95% bootstrap interval;
     filled where the interval excludes 0; "all" pools every speed above 0."""
     diffs = [d for d in paired_differences(records, planners=planners) if d.ci_pp is not None]

@@ -13,6 +13,7 @@ from suite.execution.execution_records import (
     ELSEWHERE,
     FINAL_RETURN_NOT_EXECUTED,
     NOT_ATTEMPTED,
+    ExecutionRecord,
     fate_counts,
 )
 from suite.report.summary_tables import format_number
@@ -29,14 +30,14 @@ time until the last can was in the bin. Real-time factor: simulated / wall time 
 """
 
 
-def execution_table(executions: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None,
+def execution_table(executions: Sequence[ExecutionRecord], *, planners: Sequence[str] | None = None,
                     tablefmt: str = "github") -> str:
     """Per planner: where the cans ended after physics execution, contacts, tracking and time
     (`execution_rows` as a table)."""
     return tabulate(*reversed(execution_rows(executions, planners=planners)), tablefmt=tablefmt)
 
 
-def execution_rows(executions: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
+def execution_rows(executions: Sequence[ExecutionRecord], *, planners: Sequence[str] | None = None
                    ) -> tuple[list[str], list[list[Any]]]:
     """Per planner: where the cans ended after physics execution, contacts, tracking and time.
 

@@ -2,10 +2,11 @@
 planners compared episode by episode on the same bin paths (`summary_moving_bin_paired`); where a
 replan's time goes.
 
-Every figure comes from moving_bin.json alone (plain dicts, `suite.execution.moving_bin.MovingBinRecord`).
+Every figure comes from moving_bin.json alone, read as `suite.execution.moving_bin_records.MovingBinRecord`.
 Records written before the loop joined replans on the move lack its newer fields (bin_seed,
 path_index, latency_mode, release_mode, cans_put_down, failures_by_stage, splices_at_rest, ...):
-every one of them is read with a default, and a column whose field no record carries is not shown.
+every one of them is read with a default (a count as None: not recorded), and a column whose field
+no record carries is not shown.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 from tabulate import tabulate
 
+from suite.execution.moving_bin_records import MovingBinRecord, ReplanEvent
 from suite.report.outcomes import wilson_interval
 from suite.report.summary_moving_bin_paired import (
     PAIRED_CAPTION,
@@ -64,13 +66,13 @@ STAGE_SHORT = {"goal_ik": "ik"}
 STEPS = ("world", "blend", "ik", "plan", "join", "validate", "person", "timing")
 
 
-def _deadline_bound(e: dict[str, Any]) -> bool:
+def _deadline_bound(e: ReplanEvent) -> bool:
     """A replan under a deadline: one with a deadline, or a drift or arrival replan (in modelled
     mode these carry none); not the first transit, a return or a put-down, which the arm waits for."""
     return e.deadline_s is not None or e.trigger in ("drift", "arrival", "resume")
 
 
-def _total(rs: Sequence[dict[str, Any]], key: str) -> int | None:
+def _total(rs: Sequence[MovingBinRecord], key: str) -> int | None:
     """The sum of an integer field over the records carrying it; None if none does (an older record)."""
     values = [getattr(r, key) for r in rs if getattr(r, key) is not None]
     return int(sum(values)) if values else None
@@ -130,7 +132,7 @@ class SpeedCell:
         return self.replans / self.cans_attempted if self.cans_attempted else math.nan
 
 
-def _stages(rs: Sequence[dict[str, Any]]) -> dict[str, int] | None:
+def _stages(rs: Sequence[MovingBinRecord]) -> dict[str, int] | None:
     tables = [r.failures_by_stage for r in rs if isinstance(r.failures_by_stage, dict)]
     if not tables:
         return None
@@ -141,7 +143,7 @@ def _stages(rs: Sequence[dict[str, Any]]) -> dict[str, int] | None:
     return out
 
 
-def _splice_speeds(rs: Sequence[dict[str, Any]]) -> tuple[float, ...]:
+def _splice_speeds(rs: Sequence[MovingBinRecord]) -> tuple[float, ...]:
     """The joint speed at every drift replan's splice (the events': the replans made while the arm
     moves; those after an arrival or a protective stop start from rest); for a record whose events
     lack it, its median over every splice."""
@@ -157,7 +159,7 @@ def _splice_speeds(rs: Sequence[dict[str, Any]]) -> tuple[float, ...]:
     return tuple(out)
 
 
-def speed_cells(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None) -> list[SpeedCell]:
+def speed_cells(records: Sequence[MovingBinRecord], *, planners: Sequence[str] | None = None) -> list[SpeedCell]:
     """Per planner (in the given order, then any other in the records), speed (ascending), latency
     mode and release mode, the episodes' totals (over the episodes with status ok)."""
     out = []
@@ -233,7 +235,7 @@ def _fraction_cell(c: SpeedCell) -> str:
     return f"{c.cans_in_bin}/{c.cans_offered} ({100 * c.rate:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}])"
 
 
-def moving_bin_rows(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
+def moving_bin_rows(records: Sequence[MovingBinRecord], *, planners: Sequence[str] | None = None
                     ) -> tuple[list[str], list[list[Any]]]:
     """The main table's headers and rows: one per planner and speed (and latency and release mode
     when the run has more than one of either; their columns only then).
@@ -331,7 +333,7 @@ def _steps_in(tables: Sequence[dict[str, Any]]) -> list[str]:
     return [s for s in STEPS if s in seen] + [s for s in seen if s not in STEPS]
 
 
-def latency_table(records: Sequence[dict[str, Any]], planners: Sequence[str] | None = None
+def latency_table(records: Sequence[MovingBinRecord], planners: Sequence[str] | None = None
                   ) -> tuple[list[str], list[list[Any]], set[str]]:
     """The per-step latency table (headers, rows) and where its numbers come from ("events",
     "episodes"); no rows when no measured-latency record has step times."""
@@ -376,7 +378,7 @@ def latency_table(records: Sequence[dict[str, Any]], planners: Sequence[str] | N
     return headers, rows, {s for s, _, _, _ in per_planner.values()}
 
 
-def latency_rows(records: Sequence[dict[str, Any]], planners: Sequence[str] | None = None
+def latency_rows(records: Sequence[MovingBinRecord], planners: Sequence[str] | None = None
                  ) -> tuple[list[str], list[list[Any]]]:
     """Per planner, the median / p95 of each step of the deadline-bound replans (ms); see `latency_table`."""
     headers, rows, _ = latency_table(records, planners)
@@ -385,7 +387,7 @@ def latency_rows(records: Sequence[dict[str, Any]], planners: Sequence[str] | No
 
 # --- the section --------------------------------------------------------------------------------
 
-def moving_bin_tables(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
+def moving_bin_tables(records: Sequence[MovingBinRecord], *, planners: Sequence[str] | None = None
                       ) -> list[tuple[str, list[str], list[list[Any]]]]:
     """The section's tables in order, each as (caption, headers, rows): the main one (no caption:
     the section's text is its caption), the paired differences and the latency per step (each
@@ -400,7 +402,7 @@ def moving_bin_tables(records: Sequence[dict[str, Any]], *, planners: Sequence[s
     return out
 
 
-def moving_bin_table(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None,
+def moving_bin_table(records: Sequence[MovingBinRecord], *, planners: Sequence[str] | None = None,
                      tablefmt: str = "github") -> str:
     """The main table, then (each after its caption) the paired differences and the latency per step."""
     parts = []

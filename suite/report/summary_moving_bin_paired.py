@@ -2,7 +2,7 @@
 per can offered, over the episodes (scene, seeded bin path, speed, modes) that both planners met,
 with a percentile-bootstrap interval that resamples scenes.
 
-Every figure comes from moving_bin.json alone (plain dicts, `suite.execution.moving_bin.MovingBinRecord`);
+Every figure comes from moving_bin.json alone (`suite.execution.moving_bin_records.MovingBinRecord`);
 a record written before bin paths were seeded or modes named reads its fields with a default
 (`latency_mode`, `release_mode`, `episode_key`).
 """
@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from suite.execution.moving_bin_records import MovingBinRecord
 from suite.report.summary_tables import format_number
 
 #: The fewest paired episodes, and scenes, over which a difference may be called established.
@@ -42,24 +43,24 @@ N_RESAMPLES = 10_000
 BOOTSTRAP_SEED = 0
 
 
-def latency_mode(r: dict[str, Any]) -> str:
+def latency_mode(r: MovingBinRecord) -> str:
     """An episode's latency mode, "measured" for a record written before modes were named."""
     return r.latency_mode or "measured"
 
 
-def release_mode(r: dict[str, Any]) -> str:
+def release_mode(r: MovingBinRecord) -> str:
     """An episode's release mode, "rest" for a record written before releases on the move."""
     return r.release_mode or "rest"
 
 
-def planner_order(records: Sequence[dict[str, Any]], planners: Sequence[str] | None) -> list[str]:
+def planner_order(records: Sequence[MovingBinRecord], planners: Sequence[str] | None) -> list[str]:
     """The planners of the records: those of `planners` in its order, then the others as they come."""
     present = list(dict.fromkeys(r.planner for r in records))
     order = [p for p in (planners or ()) if p in present]
     return order + [p for p in present if p not in order]  # the records' own planners too
 
 
-def episode_key(r: dict[str, Any]) -> tuple:
+def episode_key(r: MovingBinRecord) -> tuple:
     """What every planner meets in the same way: the scene, the bin path, the speed and the modes."""
     return (r.variant, r.scene_seed, r.bin_seed, int(r.path_index or 0),
             float(r.speed_m_s), latency_mode(r), release_mode(r))
@@ -117,7 +118,7 @@ def bootstrap_mean_ci(d: np.ndarray, *, clusters: Sequence | None = None, n_resa
     return float(lo), float(hi)
 
 
-def _episode_rates(records: Sequence[dict[str, Any]], planner: str) -> dict[tuple, float]:
+def _episode_rates(records: Sequence[MovingBinRecord], planner: str) -> dict[tuple, float]:
     """Cans in the bin per can offered per episode key (episodes that ran or ended in an error,
     which delivers none of the cans it did not finish; a key met twice takes the mean)."""
     by_key: dict[tuple, list[float]] = {}
@@ -140,7 +141,7 @@ def _difference(a: str, b: str, keys: Sequence[tuple], ra: dict, rb: dict, group
                             scenes=len(set(scenes)))
 
 
-def paired_differences(records: Sequence[dict[str, Any]], *, planners: Sequence[str] | None = None
+def paired_differences(records: Sequence[MovingBinRecord], *, planners: Sequence[str] | None = None
                        ) -> list[PairedDifference]:
     """Every pair of planners (A before B in the given order) at every speed (and modes) where they
     share episodes, then pooled over them all (when there is more than one)."""
@@ -164,7 +165,7 @@ def _pp(v: float) -> str:
     return f"{v:+.1f}" if abs(v) >= 0.05 else "0.0"
 
 
-def paired_rows(records: Sequence[dict[str, Any]], planners: Sequence[str] | None = None
+def paired_rows(records: Sequence[MovingBinRecord], planners: Sequence[str] | None = None
                 ) -> tuple[list[str], list[list[Any]]]:
     """The paired table: per pair of planners and speed, episodes paired, mean difference (pp), its
     95% bootstrap interval, established. No rows when no two planners share an episode."""

@@ -138,3 +138,16 @@ def test_perceived_kinect_grasps_recycle_a_can_in_physics():
                                      "perceived", 5.0, scene.seed, perception=setup))
     assert rec.perception == setup.to_json()
     assert rec.cans_in_bin == 1, rec
+
+
+def test_an_execution_record_is_told_apart_by_its_grasp_source():
+    from suite.bench.execution import _source, _source_of
+    from suite.execution.execution_records import ExecutionRecord
+
+    base = {"planner": "rrt", "scene_seed": 0, "variant": "open", "cans_total": 1}
+    setup = PerceptionSetup().to_json()
+    perceived = ExecutionRecord.from_json({**base, "grasps": "perceived", "perception": setup,
+                                           "worlds": {"planned": "perceived"}})
+    truth = ExecutionRecord.from_json({**base, "grasps": "truth"})  # a record without worlds: planned in the truth
+    assert _source_of(perceived) == _source("perceived", setup, "perceived") != _source("perceived", setup, "truth")
+    assert _source_of(truth) == _source("truth", None, "truth")

@@ -45,9 +45,12 @@ def test_every_shipped_moving_bin_file_reads_and_the_current_format_round_trips(
     assert len(records) == len(doc["moving_bin"]) and all(isinstance(r, MovingBinRecord) for r in records)
     if doc.get("format_version") == FORMAT_VERSION:
         assert [r.to_json() for r in records] == doc["moving_bin"]
-    else:  # an older format: what it did not count is None, not 0
+    else:  # an older format: what it did not count is None, not 0; what it held is written back unchanged
         missing = [k for k in COUNTED_SINCE_V2 if k not in doc["moving_bin"][0]]
         assert missing and all(getattr(records[0], k) is None for k in missing)
+        for r, raw in zip(records, doc["moving_bin"], strict=True):
+            out = r.to_json()
+            assert {k: out.get(k) for k in raw} == raw
     write_moving_bin(tmp_path, records)
     assert read_moving_bin(tmp_path) == records
 
@@ -61,3 +64,16 @@ def test_a_failed_execution_and_its_fates():
     assert list(rec.to_json()) == ["planner", "scene_seed", "variant", "cans_total", "error"]
     two = rec.with_(cans=[ExecutionCan(0, False, "plate"), ExecutionCan(1, False, "plate")])
     assert fate_counts([two])[NOT_ATTEMPTED] == 2 and rec.cans == []
+
+
+def test_a_moving_bin_record_keeps_keys_it_does_not_name_and_a_newer_file_is_refused(tmp_path):
+    from scenes.errors import SuiteError
+
+    raw = {"planner": "rrt", "scene_seed": 1, "variant": "open", "speed_m_s": 0.1, "scenario": {}, "status": "ok",
+           "a_later_field": [1, 2]}
+    rec = MovingBinRecord.from_json(raw)
+    assert rec.extra == {"a_later_field": [1, 2]} and rec.to_json()["a_later_field"] == [1, 2]
+    assert MovingBinRecord.from_json(rec.to_json()) == rec
+    (tmp_path / "moving_bin.json").write_text(json.dumps({"format_version": FORMAT_VERSION + 1, "moving_bin": [raw]}))
+    with pytest.raises(SuiteError, match="newer than this suite reads"):
+        read_moving_bin(tmp_path)
