@@ -76,7 +76,7 @@ def _value(v: Any, sql_type: str) -> str:
     return str(int(v))
 
 
-def _metric_names(records: Sequence[dict]) -> list[str]:
+def _metric_names(records: Sequence[TrialRecord]) -> list[str]:
     names: dict[str, None] = {}
     for r in records:
         for k, v in (r.metrics or {}).items():
@@ -216,7 +216,7 @@ def _progress_lines(records: Sequence[TrialRecord]) -> list[str]:
     return lines
 
 
-def write_arena_logs(run_dir: str | Path, *, records: Sequence[dict] | None = None) -> list[Path]:
+def write_arena_logs(run_dir: str | Path, *, records: Sequence[TrialRecord] | None = None) -> list[Path]:
     """Write run_dir/arena/ompl_benchmark.log (the whole run) and one log per problem kind.
 
     Returns:

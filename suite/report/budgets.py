@@ -37,7 +37,7 @@ def by_budget_view(records: Sequence[TrialRecord]) -> list[TrialRecord]:
     return [r.with_(planner=budget_label(str(r.planner), float(r.time_limit_s))) for r in records]
 
 
-def _cell(records: Sequence[dict], planner: str, budget: float, family: str | None,
+def _cell(records: Sequence[TrialRecord], planner: str, budget: float, family: str | None,
           metric: str = "length_ratio"):
     mine = [r for r in records if r.planner == planner and float(r.time_limit_s) == budget
             and (family is None or family_of(r) == family)]

@@ -85,7 +85,7 @@ def outcomes(records: Iterable[TrialRecord], *, metrics: Sequence[str]) -> dict[
         records: the trials of ONE planner.
         metrics: the metric names to collapse (see `suite.run.records.metric`).
     """
-    groups: dict[tuple, list[dict[str, Any]]] = {}
+    groups: dict[tuple, list[TrialRecord]] = {}
     for r in records:
         groups.setdefault(problem_key(r), []).append(r)
     out = {}

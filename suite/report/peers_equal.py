@@ -269,7 +269,7 @@ def analyse_setting(setting: Path, *, planners: tuple[str, str] = PLANNERS, resa
             the planners, or planners whose problems differ within a run.
     """
     runs = setting_runs(setting)
-    records: dict[str, list[dict[str, Any]]] = {p: [] for p in planners}
+    records: dict[str, list[TrialRecord]] = {p: [] for p in planners}
     seeds, commits, datasets, budgets, ranges = [], [], set(), set(), set()
     for run in runs:
         manifest = read_manifest(run)

@@ -14,6 +14,7 @@ import logging
 from collections.abc import Sequence
 from pathlib import Path
 
+from suite.execution.execution_records import ExecutionRecord
 from suite.report.plots_common import PLOTS_DIR
 from suite.report.plots_execution import plot_execution
 from suite.report.plots_families import (
@@ -28,6 +29,7 @@ from suite.report.plots_stats import (
     plot_time_cdf,
 )
 from suite.run.records import (
+    TrialRecord,
     is_success,
     planners_in,
     problem_kinds_in,
@@ -38,8 +40,8 @@ from suite.run.records import (
 log = logging.getLogger(__name__)
 
 
-def make_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None,
-               executions: Sequence[dict] = (), budget_records: Sequence[dict] = ()) -> list[Path]:
+def make_plots(run_dir: str | Path, *, records: Sequence[TrialRecord] | None = None,
+               executions: Sequence[ExecutionRecord] = (), budget_records: Sequence[TrialRecord] = ()) -> list[Path]:
     """Draw every figure of a run into run_dir/plots/.
 
     Args:
@@ -55,8 +57,8 @@ def make_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None,
                        background=0.0).finish()
 
 
-def plot_jobs(run_dir: str | Path, *, records: Sequence[dict] | None = None, executions: Sequence[dict] = (),
-              budget_records: Sequence[dict] = ()) -> list[tuple]:
+def plot_jobs(run_dir: str | Path, *, records: Sequence[TrialRecord] | None = None,
+              executions: Sequence[ExecutionRecord] = (), budget_records: Sequence[TrialRecord] = ()) -> list[tuple]:
     """Every figure of a run as (function, args, kwargs), in the order `make_plots` lists them."""
     run_dir = Path(run_dir)
     records = list(records) if records is not None else read_trials(run_dir)
@@ -158,8 +160,9 @@ class PlotsInProgress:
         return written
 
 
-def start_plots(run_dir: str | Path, *, records: Sequence[dict] | None = None, executions: Sequence[dict] = (),
-                budget_records: Sequence[dict] = (), background: float = 0.6) -> PlotsInProgress:
+def start_plots(run_dir: str | Path, *, records: Sequence[TrialRecord] | None = None,
+                executions: Sequence[ExecutionRecord] = (), budget_records: Sequence[TrialRecord] = (),
+                background: float = 0.6) -> PlotsInProgress:
     """Start drawing a run's figures: the last `background` share of them (by count) in a forked
     process, so that the caller can write its tables meanwhile; `finish()` draws the rest and
     waits. Without fork (not Linux or macOS), or with background 0, all are drawn by `finish`."""

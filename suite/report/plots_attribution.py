@@ -9,7 +9,7 @@ import numpy as np
 
 from suite.report.outcomes import family_of, is_cold
 from suite.report.plots_common import planner_colors, plt, save_figure
-from suite.run.records import SUCCESS
+from suite.run.records import SUCCESS, TrialRecord
 
 #: How each engine's share is drawn: its hatch, and the legend words (the timing kind decides
 #: how far the share is to be trusted: clocked around each call, replayed from a sample of the
@@ -21,7 +21,7 @@ ENGINE_STYLE = {
 }
 
 
-def plot_time_attribution(records: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path | None:
+def plot_time_attribution(records: Sequence[TrialRecord], *, planners: Sequence[str], path: Path) -> Path | None:
     """Stacked bars per planner in each family: the shares of planning time spent in each
     engine's collision queries (python-fcl, Drake, roboplan: one hatch each) and in the rest
     (medians over warm successful trials that carry `attribution`, scaled so the parts add up to

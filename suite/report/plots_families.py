@@ -15,20 +15,21 @@ from matplotlib.ticker import NullFormatter
 
 from suite.report.outcomes import family_of, outcomes, solved_count, wilson_interval
 from suite.report.plots_common import planner_colors, plt, save_figure
+from suite.run.records import TrialRecord
 
 ALL_FAMILIES = "all"
 
 
-def _families(records: Sequence[dict]) -> list[str]:
+def _families(records: Sequence[TrialRecord]) -> list[str]:
     return sorted({family_of(r) for r in records})
 
 
-def _per_family(records: Sequence[dict], planner: str, family: str, metrics: Sequence[str]):
+def _per_family(records: Sequence[TrialRecord], planner: str, family: str, metrics: Sequence[str]):
     mine = [r for r in records if r.planner == planner and (family == ALL_FAMILIES or family_of(r) == family)]
     return list(outcomes(mine, metrics=metrics).values())
 
 
-def plot_success_by_family(records: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path:
+def plot_success_by_family(records: Sequence[TrialRecord], *, planners: Sequence[str], path: Path) -> Path:
     """Grouped bars: each planner's success rate over the distinct problems of each family (and all),
     with its 95% Wilson interval and the count solved/problems above the bar."""
     colors = planner_colors(planners)
@@ -65,7 +66,7 @@ def plot_success_by_family(records: Sequence[dict], *, planners: Sequence[str], 
     return save_figure(fig, path)
 
 
-def plot_length_ratio_by_family(records: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path:
+def plot_length_ratio_by_family(records: Sequence[TrialRecord], *, planners: Sequence[str], path: Path) -> Path:
     """Per family, each planner's length ratio (joint path / the problem's best known), one dot per
     solved distinct problem, with its median as a bar; 1 is the reference, and the axis reaches
     down to any ratio below it (a path shorter than the reference)."""

@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.patches import Polygon
 
 from suite.report.plots_common import planner_colors, plt, save_figure
-from suite.run.records import is_success, joint_path, problem_number
+from suite.run.records import TrialRecord, is_success, joint_path, problem_number
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +81,7 @@ def _draw_scene(ax, spec, cans, *, dims: tuple[int, int]) -> None:
 
 
 def plot_gripper_paths(
-    records: Sequence[dict], *, planners: Sequence[str], scene_seed: int, variant: str, manifest: dict[str, Any],
+    records: Sequence[TrialRecord], *, planners: Sequence[str], scene_seed: int, variant: str, manifest: dict[str, Any],
     path: Path,
 ) -> Path:
     """The gripper's paths (forward kinematics of the saved joint paths) over one scene: top and side view."""
@@ -144,9 +144,9 @@ def plot_gripper_paths(
     return save_figure(fig, path)
 
 
-def _profile_records(records: Sequence[dict], planners: Sequence[str], kind: str):
+def _profile_records(records: Sequence[TrialRecord], planners: Sequence[str], kind: str):
     """For one problem (of `kind`, in the first scene where most planners solved it), each planner's record."""
-    cands: dict[tuple, dict[str, dict]] = {}
+    cands: dict[tuple, dict[str, TrialRecord]] = {}
     for r in records:
         if r.problem == kind and is_success(r) and joint_path(r) is not None:
             key = (int(r.scene_seed), str(r.variant), problem_number(r))
@@ -158,7 +158,7 @@ def _profile_records(records: Sequence[dict], planners: Sequence[str], kind: str
     return best, {p: cands[best][p] for p in planners if p in cands[best]}
 
 
-def plot_joint_profiles(records: Sequence[dict], *, planners: Sequence[str], kind: str, path: Path) -> Path | None:
+def plot_joint_profiles(records: Sequence[TrialRecord], *, planners: Sequence[str], kind: str, path: Path) -> Path | None:
     """Joint positions and velocities of each planner's timed trajectory of one motion, with limits dashed.
 
     The saved joint paths are timed again with `suite.scoring.timing.time_parameterize` (TOPP-RA), as the

@@ -11,7 +11,7 @@ from matplotlib.patches import Patch
 
 from suite.report.outcomes import outcomes
 from suite.report.plots_common import planner_colors, plt, save_figure
-from suite.run.records import SUCCESS, metric_values, problem_kinds_in, statuses_in
+from suite.run.records import SUCCESS, TrialRecord, metric_values, problem_kinds_in, statuses_in
 
 STATUS_COLORS = {
     "success": "#59a14f",
@@ -52,14 +52,14 @@ def _no_data(ax, text: str = "no successful trials") -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.4")
 
 
-def _problem_values(records: Sequence[dict], planner: str, name: str) -> np.ndarray:
+def _problem_values(records: Sequence[TrialRecord], planner: str, name: str) -> np.ndarray:
     """One value per distinct problem the planner solved (the median of its successful trials)."""
     vals = np.array([o.metrics[name] for o in outcomes([r for r in records if r.planner == planner],
                                                         metrics=(name,)).values()], dtype=float)
     return vals[np.isfinite(vals)]
 
 
-def plot_metric_boxes(records: Sequence[dict], *, planners: Sequence[str], path: Path,
+def plot_metric_boxes(records: Sequence[TrialRecord], *, planners: Sequence[str], path: Path,
                       panels: dict[str, tuple[str, str, bool]] | None = None, title: str | None = None) -> Path:
     """Box plots of each metric by planner, one dot per solved distinct problem, with n shown.
 
@@ -107,7 +107,7 @@ def plot_metric_boxes(records: Sequence[dict], *, planners: Sequence[str], path:
     return save_figure(fig, path)
 
 
-def plot_outcomes(records: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path:
+def plot_outcomes(records: Sequence[TrialRecord], *, planners: Sequence[str], path: Path) -> Path:
     """Stacked bars of trial outcomes by status for each planner: over all motions and per kind."""
     statuses = statuses_in(records)
     kinds = problem_kinds_in(records)
@@ -143,7 +143,7 @@ def plot_outcomes(records: Sequence[dict], *, planners: Sequence[str], path: Pat
     return save_figure(fig, path)
 
 
-def plot_time_cdf(records: Sequence[dict], *, planners: Sequence[str], path: Path) -> Path:
+def plot_time_cdf(records: Sequence[TrialRecord], *, planners: Sequence[str], path: Path) -> Path:
     """Share of each planner's trials solved within a planning time (log time axis)."""
     colors = planner_colors(planners)
     fig, ax = plt.subplots(figsize=(7.5, 4.6))

@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 from tabulate import tabulate
 
+from suite.execution.execution_records import ExecutionRecord
+from suite.execution.moving_bin_records import MovingBinRecord
 from suite.report.outcomes import FEW_PROBLEMS
 from suite.report.summary_execution import EXECUTION_INTRO, execution_table
 from suite.report.summary_search import (
@@ -267,11 +269,11 @@ def write_summary(
     planners: Sequence[str] | None = None,
     seed: int = 0,
     title: str | None = None,
-    executions: Sequence[dict[str, Any]] = (),
-    budget_records: Sequence[dict[str, Any]] = (),
+    executions: Sequence[ExecutionRecord] = (),
+    budget_records: Sequence[TrialRecord] = (),
     summary: RunSummary | None = None,
     pairs: Sequence[PairedComparison] | None = None,
-    moving_bin: Sequence[dict[str, Any]] = (),
+    moving_bin: Sequence[MovingBinRecord] = (),
 ) -> list[Path]:
     """Write summary.md, summary.json, summary.csv (per planner, per planner x kind, per planner x
     family) and paired.csv.

@@ -4,19 +4,21 @@ the perceived worlds cost and caused."""
 from __future__ import annotations
 
 from collections import Counter
-from typing import Any, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
+from suite.execution.execution_records import ExecutionRecord
 
-def _rate(record: dict[str, Any]) -> float:
+
+def _rate(record: ExecutionRecord) -> float:
     """Cans in the bin per can on the plate (an execution that ended in an error delivered none)."""
     if record.error is not None or not record.cans_total:
         return 0.0
     return record.cans_in_bin / record.cans_total
 
 
-def paired_lines(base: Sequence[dict[str, Any]], other: Sequence[dict[str, Any]], *,
+def paired_lines(base: Sequence[ExecutionRecord], other: Sequence[ExecutionRecord], *,
                  planners: Sequence[str]) -> list[str]:
     """Per planner, over the scenes both ran: cans in the bin (base, other), their paired
     difference other - base in points with a 95% bootstrap interval over scenes, contacts, and
@@ -34,9 +36,9 @@ def paired_lines(base: Sequence[dict[str, Any]], other: Sequence[dict[str, Any]]
         ci = bootstrap_mean_ci(d) if len(d) > 1 else (float("nan"), float("nan"))
         cans_a = sum(a[k].cans_in_bin for k in keys if a[k].error is None)
         cans_b = sum(b[k].cans_in_bin for k in keys if b[k].error is None)
-        total = sum(a[k]["cans_total"] for k in keys)
+        total = sum(a[k].cans_total for k in keys)
         contacts = (sum(a[k].collisions for k in keys), sum(b[k].collisions for k in keys))
-        induced = sum(len(b[k].get("perception_induced") or []) for k in keys)
+        induced = sum(len(b[k].perception_induced or []) for k in keys)
         lines.append(f"  {p}: {len(keys)} scenes, cans in the bin {cans_a}/{total} -> {cans_b}/{total}; "
                      f"paired difference {100 * d.mean():+.1f} points [{100 * ci[0]:+.1f}, {100 * ci[1]:+.1f}], "
                      f"scenes worse {int((d < 0).sum())}, better {int((d > 0).sum())}; "
@@ -44,7 +46,7 @@ def paired_lines(base: Sequence[dict[str, Any]], other: Sequence[dict[str, Any]]
     return lines
 
 
-def perceived_world_lines(records: Sequence[dict[str, Any]], *, planners: Sequence[str]) -> list[str]:
+def perceived_world_lines(records: Sequence[ExecutionRecord], *, planners: Sequence[str]) -> list[str]:
     """What the perceived worlds were (voxel boxes, build time against the planning time they
     fed) and the perception-induced failures by cause."""
     worlds = [w for r in records for w in (r.perceived_worlds or [])]

@@ -116,7 +116,7 @@ class PairedComparison:
 # --- computation ---------------------------------------------------------------------------------
 
 
-def _group(records: Sequence[dict], *, planner: str, problem: str, variant: str) -> GroupSummary:
+def _group(records: Sequence[TrialRecord], *, planner: str, problem: str, variant: str) -> GroupSummary:
     counts = {s: 0 for s in statuses_in(records)}
     for r in records:
         counts[str(r.status)] += 1

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from suite.report.outcomes import Outcome, outcomes, solved_count
+from suite.run.records import TrialRecord
 
 #: The rule in one line, as written into a tuned-config file.
 RULE = ("candidates whose offline seconds per world exceed the planner's bound at p90 are out (if any is left); "
@@ -93,7 +94,7 @@ class CandidateResult:
     offline_worlds: int = 0
 
 
-def offline_per_world(records: Sequence[dict]) -> dict[str, float]:
+def offline_per_world(records: Sequence[TrialRecord]) -> dict[str, float]:
     """world -> the offline seconds its records report, by `stats.world_hash`: the build's CPU time
     (`stats.offline_cpu_s`: one IRIS thread, so the wall time on a core of its own, whatever else
     the machine ran) where recorded, else its wall time (`stats.offline_s`); the largest when
@@ -118,7 +119,7 @@ def _median(values: Sequence[float]) -> float:
     return float(np.median(arr)) if len(arr) else math.nan
 
 
-def evaluate(candidates: Sequence[tuple[dict[str, Any], Sequence[dict]]]) -> list[CandidateResult]:
+def evaluate(candidates: Sequence[tuple[dict[str, Any], Sequence[TrialRecord]]]) -> list[CandidateResult]:
     """Per candidate (its settings and its trial records) the figures the rule ranks on."""
     per: list[dict[tuple, Outcome]] = [outcomes(recs, metrics=TUNING_METRICS) for _, recs in candidates]
     common = set.intersection(*[{k for k, o in oc.items() if o.successes} for oc in per]) if per else set()

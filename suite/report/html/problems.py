@@ -50,8 +50,8 @@ class Problem:
 
     pid: str
     anchor: str
-    first: dict[str, Any]
-    trials: dict[str, list[dict[str, Any]]]
+    first: TrialRecord
+    trials: dict[str, list[TrialRecord]]
 
     @property
     def family(self) -> str:
@@ -72,8 +72,8 @@ def problem_label(key: tuple) -> str:
 
 def group_problems(records: Sequence[TrialRecord]) -> list[Problem]:
     """The run's distinct problems, ordered by family, scene, can and cycle order of the kind."""
-    groups: dict[tuple, dict[str, list[dict]]] = {}
-    firsts: dict[tuple, dict] = {}
+    groups: dict[tuple, dict[str, list[TrialRecord]]] = {}
+    firsts: dict[tuple, TrialRecord] = {}
     for r in records:
         key = problem_key(r)
         firsts.setdefault(key, r)
