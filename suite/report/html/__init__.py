@@ -18,9 +18,9 @@ import logging
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from scenes.errors import SuiteError
+from suite.execution.execution_records import ExecutionRecord
 from suite.report.html.page import REPORT_FILE, render
 from suite.run.records import TRIALS_FILE, TrialRecord
 
@@ -36,7 +36,7 @@ def write_html(
     planners: Sequence[str] | None = None,
     summary=None,
     pairs=None,
-    executions: Sequence[dict[str, Any]] | None = None,
+    executions: Sequence[ExecutionRecord] | None = None,
     seed: int = 0,
 ) -> Path:
     """Write run_dir/report.html from the run's saved files.

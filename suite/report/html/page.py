@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from suite.execution.execution_records import ExecutionRecord
 from suite.report.html import drilldown, sections
 from suite.report.html.markup import esc, inline_md
 from suite.report.html.problems import drawing_json, group_problems, load_world
@@ -54,7 +55,7 @@ def render(
     planners: Sequence[str],
     summary: RunSummary,
     pairs: Sequence[PairedComparison],
-    executions: Sequence[dict[str, Any]],
+    executions: Sequence[ExecutionRecord],
     command_dir: str,
 ) -> str:
     """The whole page as one string."""

@@ -13,6 +13,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from suite.execution.execution_records import ExecutionRecord
+from suite.execution.moving_bin_records import MovingBinRecord
 from suite.report.html.markup import esc, inline_md, png_img, table
 from suite.report.plots_common import PLOTS_DIR
 from suite.report.summary_stats import (
@@ -261,7 +263,7 @@ def more_stats_html(records: Sequence[TrialRecord], pairs: Sequence[PairedCompar
     return "".join(out)
 
 
-def execution_html(run_dir: Path, executions: Sequence[dict[str, Any]], planners: Sequence[str]) -> str:
+def execution_html(run_dir: Path, executions: Sequence[ExecutionRecord], planners: Sequence[str]) -> str:
     """execution.json's table, figure and the Meshcat replays compare wrote beside it."""
     from suite.report.summary_execution import EXECUTION_INTRO, execution_rows
 
@@ -277,7 +279,7 @@ def execution_html(run_dir: Path, executions: Sequence[dict[str, Any]], planners
     ])
 
 
-def moving_bin_html(run_dir: Path, records: Sequence[TrialRecord], planners: Sequence[str]) -> str:
+def moving_bin_html(run_dir: Path, records: Sequence[MovingBinRecord], planners: Sequence[str]) -> str:
     """moving_bin.json's tables (per planner and speed; planners paired over shared episodes; latency
     per step), its figure and the episodes' Meshcat replays."""
     from suite.report.summary_moving_bin import MOVING_BIN_INTRO, moving_bin_tables

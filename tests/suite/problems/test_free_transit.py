@@ -83,8 +83,11 @@ def test_a_stored_free_transit_reads_back_and_a_cycle_line_is_as_before():
 def test_records_name_a_free_transits_task():
     from suite.run.records import problem_key, problem_number, problem_subject
 
-    can = {"scene_seed": 0, "variant": "open", "can_id": 2, "problem": "lift"}
-    free = {"scene_seed": 0, "variant": "gcs-arm", "can_id": None, "task_index": 4, "problem": FREE_TRANSIT}
+    from suite.run.records import TrialRecord
+
+    can = TrialRecord(planner="gcs", status="success", scene_seed=0, variant="open", can_id=2, problem="lift")
+    free = TrialRecord(planner="gcs", status="success", scene_seed=0, variant="gcs-arm", can_id=None, task_index=4,
+                       problem=FREE_TRANSIT)
     assert (problem_number(can), problem_subject(can)) == (2, "can 2")
     assert (problem_number(free), problem_subject(free)) == (4, "task 4")
     assert problem_key(free) == (0, "gcs-arm", 4, FREE_TRANSIT) and problem_key(can) == (0, "open", 2, "lift")

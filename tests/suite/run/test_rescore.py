@@ -27,7 +27,8 @@ NOT_OF_THE_PATH = {"timing_time_s"}
 
 @pytest.fixture(scope="module")
 def records():
-    return synthetic_records(variants=("open",), cans=2)
+    """The synthetic run's lines as plain JSON objects, as trials.jsonl holds them."""
+    return [r.to_json() for r in synthetic_records(variants=("open",), cans=2)]
 
 
 def hand_built(rec: dict) -> tuple[CollisionWorld, np.ndarray]:
