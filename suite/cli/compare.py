@@ -21,7 +21,7 @@ from scenes.errors import SuiteError
 from scenes.schema import load
 from suite.problems import DEFAULT_TIER
 from suite.run.comparison import HOW_IT_RUNS
-from suite.run.runner import TRIALS_FILE, CompareConfig, check_planner_configs
+from suite.run.runner import TRIALS_FILE, CompareConfig, check_planner_configs, recorded_counts
 
 RESULTS_DIR = Path("results")
 #: Flags that describe generated scenes (they cannot be combined with --dataset).
@@ -291,8 +291,6 @@ def resume_command(out: Path) -> str:
 def run(args: argparse.Namespace) -> int:
     from suite.run.comparison import run_comparison
     from suite.run.interrupt import Interrupted
-    from suite.run.manifest import read_run_manifest
-
     config = resolve_config(args)
     scenario = moving_bin_scenario(args, config) if getattr(args, "moving_bin", None) else None
     out = run_dir(args)
@@ -303,7 +301,7 @@ def run(args: argparse.Namespace) -> int:
                               check_trials=None if scenario is None else _moving_bin_trials,
                               then=lambda done: _execute_and_report(args, done, scenario=scenario, t0=t0))
     except Interrupted as exc:
-        kept = (read_run_manifest(out) or {}).get("trials_recorded")
+        kept = recorded_counts(out, total=None)["trials_recorded"]  # counted in trials.jsonl itself
         print(f"interrupted by {exc.name}: {kept} trial(s) recorded in {out} are kept; "
               f"resume with: {resume_command(out)}", file=sys.stderr)
         return exc.exit_code

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from scenes.errors import SuiteError
 from scenes.moving_bin import MovingBinScenario
 from scenes.scene import Scene
 from suite.execution.config import ExecutionConfig
@@ -150,14 +151,14 @@ class MovingBinRecord:
     planner: str
     scene_seed: int
     variant: str
-    speed_m_s: float
+    speed_m_s: float | None
     scenario: dict[str, Any]
     status: str
     reason: str = ""
     bin_seed: int | None = None
     path_index: int = 0
     latency_mode: str = "measured"
-    release_mode: str = "moving"
+    release_mode: str | None = "moving"  # None: an older record (released at rest)
     bin_mean_speed_m_s: float | None = None
     cans_total: int = 0
     cans_attempted: int = 0
@@ -214,11 +215,19 @@ class MovingBinRecord:
         known["extra"] = {k: v for k, v in obj.items() if k not in known and k != "replans_per_can"}
         # a count an earlier format did not keep is None (not recorded), not 0: the tables leave it out
         known.update((name, None) for name in COUNTED_SINCE_V2 if name not in obj)
+        if "release_mode" not in obj:  # written before releases on the move: the arm released at rest
+            known["release_mode"] = None
+        if "scenario" not in obj:  # a worker's death recorded before its record named the scenario
+            known.update(scenario={}, speed_m_s=obj.get("speed_m_s"))
         known["cans"] = tuple(CanEpisode(**_known(CanEpisode, c)) for c in obj.get("cans") or ())
         known["events"] = tuple(ReplanEvent(**_known(ReplanEvent, e)) for e in obj.get("events") or ())
         for name in ("fates", "contact_events"):
             known[name] = tuple(obj.get(name) or ())
-        return cls(**known)
+        try:
+            return cls(**known)
+        except TypeError as exc:
+            raise SuiteError(f"a moving-bin record of {obj.get('planner')!r} on seed {obj.get('scene_seed')!r} "
+                             f"is not one: {exc}") from None
 
     def to_json(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "extra"}

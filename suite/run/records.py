@@ -101,8 +101,8 @@ class TrialRecord(JsonRecord):
     certification: dict[str, Any] | None = None
     stats: dict[str, Any] = dataclasses.field(default_factory=dict)
     reason_code: str | None = None
-    attribution: dict[str, Any] | None = None
     worlds: dict[str, Any] | None = None
+    attribution: dict[str, Any] | None = None
 
     @property
     def succeeded(self) -> bool:

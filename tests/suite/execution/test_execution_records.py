@@ -77,3 +77,25 @@ def test_a_moving_bin_record_keeps_keys_it_does_not_name_and_a_newer_file_is_ref
     (tmp_path / "moving_bin.json").write_text(json.dumps({"format_version": FORMAT_VERSION + 1, "moving_bin": [raw]}))
     with pytest.raises(SuiteError, match="newer than this suite reads"):
         read_moving_bin(tmp_path)
+
+
+def test_older_moving_bin_records_keep_their_meaning():
+    base = {"planner": "rrt", "scene_seed": 3, "variant": "open", "speed_m_s": 0.2, "scenario": {"speed_m_s": 0.2},
+            "status": "ok", "cans_total": 2, "cans_in_bin": 1}
+    old = MovingBinRecord.from_json(base)  # before releases on the move: the arm released at rest
+    from suite.report.summary_moving_bin_paired import release_mode
+
+    assert old.release_mode is None and release_mode(old) == "rest"
+    assert release_mode(MovingBinRecord.from_json({**base, "release_mode": "moving"})) == "moving"
+    # a dead worker's episode as run_jobs recorded it before the record named its scenario
+    dead = MovingBinRecord.from_json({"planner": "rrt", "scene_seed": 3, "variant": "open", "cans_total": 5,
+                                      "error": "BrokenProcessPool", "grasps": None, "reperceive": False,
+                                      "status": "error", "reason": "BrokenProcessPool", "speed_m_s": 0.2})
+    assert dead.status == "error" and dead.scenario == {} and dead.extra["error"] == "BrokenProcessPool"
+
+
+def test_a_moving_bin_entry_that_is_not_a_record_is_one_error():
+    from scenes.errors import SuiteError
+
+    with pytest.raises(SuiteError, match="moving-bin record of 'rrt' on seed 3 is not one"):
+        MovingBinRecord.from_json({"planner": "rrt", "scene_seed": 3})
