@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 from scenes.errors import SuiteError
 from suite.cli.args import positive_float, positive_int
 from suite.problems import DEFAULT_DATASET
+from suite.run.atomic import write_text_atomically
 
 if TYPE_CHECKING:
     from suite.run.records import TrialRecord
@@ -227,6 +228,4 @@ def _write_yaml(path: Path, data: dict) -> None:
     head = (f"# {data['planner']}'s settings, chosen by `python -m suite tune --planner {data['planner']}` on the tune split\n"
             "# of the dataset below; every run uses `settings` as this planner's defaults. `table` is every\n"
             "# candidate's result on the same problems (the justification).\n")
-    tmp = path.with_suffix(".yaml.tmp")
-    tmp.write_text(head + yaml.safe_dump(data, sort_keys=False, width=110), encoding="utf-8")
-    tmp.replace(path)
+    write_text_atomically(path, head + yaml.safe_dump(data, sort_keys=False, width=110))

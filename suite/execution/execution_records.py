@@ -19,6 +19,7 @@ from suite.execution.moving_bin_records import (
     FORMAT_VERSION as MOVING_BIN_FORMAT_VERSION,
 )
 from suite.execution.moving_bin_records import MovingBinRecord
+from suite.run.atomic import write_text_atomically
 from suite.run.formats import check_version
 from suite.run.json_record import JsonRecord
 
@@ -86,16 +87,14 @@ class ExecutionRecord(JsonRecord):
     @classmethod
     def from_json(cls, obj: dict[str, Any]) -> ExecutionRecord:
         rec = super().from_json(obj)
-        rec.cans = [c if isinstance(c, ExecutionCan) else ExecutionCan.from_json(c) for c in rec.cans]
+        rec.cans = [ExecutionCan.from_json(c) for c in rec.cans]
         return rec
 
 
 def write_execution(out: str | Path, records: Sequence[ExecutionRecord]) -> Path:
     """Write the run's execution.json (atomically: a torn write never replaces a good file)."""
     path = Path(out) / EXECUTION_FILE
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"executions": [r.to_json() for r in records]}, indent=1), encoding="utf-8")
-    tmp.replace(path)
+    write_text_atomically(path, json.dumps({"executions": [r.to_json() for r in records]}, indent=1))
     return path
 
 
@@ -110,10 +109,8 @@ def read_execution(run_dir: str | Path) -> list[ExecutionRecord]:
 def write_moving_bin(out: str | Path, records: Sequence[MovingBinRecord]) -> Path:
     """Write the run's moving_bin.json (atomically)."""
     path = Path(out) / MOVING_BIN_FILE
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"format_version": MOVING_BIN_FORMAT_VERSION,
-                               "moving_bin": [r.to_json() for r in records]}, indent=1), encoding="utf-8")
-    tmp.replace(path)
+    write_text_atomically(path, json.dumps({"format_version": MOVING_BIN_FORMAT_VERSION,
+                                            "moving_bin": [r.to_json() for r in records]}, indent=1))
     return path
 
 

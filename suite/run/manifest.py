@@ -12,13 +12,13 @@ import dataclasses
 import datetime as dt
 import json
 import logging
-import os
 import platform
 import subprocess
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from scenes.errors import SuiteError
+from suite.run.atomic import write_text_atomically
 
 if TYPE_CHECKING:
     from suite.run.runner import CompareConfig
@@ -92,14 +92,7 @@ def _now() -> str:
 
 
 def _write_json_atomically(path: Path, data: dict[str, Any]) -> None:
-    """Write a JSON file beside itself, then rename it over the old one (readers never see half)."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        tmp.write_text(json.dumps(data, indent=2) + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    write_text_atomically(path, json.dumps(data, indent=2) + "\n")
 
 
 def read_run_manifest(out: Path) -> dict[str, Any] | None:

@@ -12,14 +12,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import os
-import tempfile
 from collections import Counter
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from scenes.errors import SuiteError
+from suite.run.atomic import write_text_atomically
 from suite.run.recorded_problems import RecordedProblems, Unrebuildable
 from suite.run.records import TrialRecord
 
@@ -101,18 +100,8 @@ def rescore_records(records: Sequence[TrialRecord], manifest: dict[str, Any]) ->
 
 
 def write_trials_atomically(path: Path, records: Sequence[TrialRecord]) -> None:
-    """Replace a trials.jsonl with these records: a temporary file beside it, then one rename."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            for rec in records:
-                f.write(json.dumps(rec.to_json()) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Replace a trials.jsonl with these records (`write_text_atomically`: one rename)."""
+    write_text_atomically(path, "".join(json.dumps(rec.to_json()) + "\n" for rec in records))
 
 
 def rescore_run(run_dir: str | Path) -> RescoreCounts:
